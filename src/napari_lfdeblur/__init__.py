@@ -1,0 +1,74 @@
+"""napari-lfdeblur: blind motion deblurring of 4D light fields.
+
+Implements Srinivasan, Ng & Ramamoorthi, "Light Field Blind Motion
+Deblurring" (CVPR 2017) as a Python library and a napari plugin.
+
+The array layout, coordinates and units are those of ``MODEL.md``: a light
+field is a ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` float32 array in [0, 1], and
+a camera path is a Bezier curve given by ``(n, 3)`` control points.
+
+Importing this package is cheap and needs neither Qt nor napari: public names
+are loaded from their modules on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.1.0"
+
+# public name -> module (relative to this package) that defines it
+_PUBLIC = {
+    # camera paths
+    "bezier_positions": "path",
+    "center_path": "path",
+    "linear_path": "path",
+    "arc_path": "path",
+    "shake_path": "path",
+    "random_path": "path",
+    "preset_path": "path",
+    "save_path_json": "path",
+    "load_path_json": "path",
+    # forward model
+    "simulate_blur": "blur",
+    "BlurOperator": "blur",
+    # epipolar images
+    "horizontal_epi": "epi",
+    "vertical_epi": "epi",
+    # sample data
+    "synthetic_scene": "samples",
+    "lytro_sample": "samples",
+    # I/O
+    "read_lightfield": "io",
+    "write_lightfield": "io",
+    # non-blind deconvolution and the paper's analytic special cases
+    "deconvolve": "deconvolution",
+    "iter_deconvolve": "deconvolution",
+    "refocus": "deconvolution",
+    "recover_plane_texture": "deconvolution",
+    # blind deblurring
+    "blind_deblur": "blind",
+    "iter_blind_deblur": "blind",
+    "BlindParams": "blind",
+    # metrics
+    "psnr": "metrics",
+    "ssim": "metrics",
+    "path_error": "metrics",
+    # devices
+    "select_device": "devices",
+}
+
+__all__ = ["__version__", *_PUBLIC]
+
+
+def __getattr__(name: str):
+    module = _PUBLIC.get(name)
+    if module is None:
+        raise AttributeError(f"module 'napari_lfdeblur' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(__all__)

@@ -1,0 +1,288 @@
+"""Shared helpers of the light-field readers and writers: errors, conversion
+to float32 in [0, 1], the memory check and atomic writes.
+
+Nothing here imports napari or Qt.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "LightFieldError",
+    "LightFieldFormatError",
+    "LightFieldReadError",
+    "InsufficientMemoryError",
+    "MEMORY_LIMIT_ENV",
+    "available_memory",
+    "check_memory",
+    "to_float01",
+    "validate_lightfield",
+    "atomic_file",
+    "atomic_dir",
+]
+
+#: Environment variable that caps the memory a read may use, in bytes.
+MEMORY_LIMIT_ENV = "LFDEBLUR_MEMORY_LIMIT"
+
+
+class LightFieldError(ValueError):
+    """A file or array is not a light field we can read or write."""
+
+
+class LightFieldFormatError(LightFieldError):
+    """The data is readable but its layout is wrong (missing view, mixed sizes,
+    wrong number of dimensions, NaN, ...)."""
+
+
+class LightFieldReadError(LightFieldError, OSError):
+    """A file could not be decoded: truncated, corrupt, or not an image at all."""
+
+
+class InsufficientMemoryError(LightFieldError, MemoryError):
+    """Decoding the file would need more memory than is available."""
+
+
+# ----------------------------------------------------------------- memory
+
+
+def available_memory() -> int:
+    """Bytes of memory a read may use.
+
+    The value of the environment variable ``LFDEBLUR_MEMORY_LIMIT`` (bytes)
+    when set, else the available system memory (``psutil`` or
+    ``/proc/meminfo``). Returns a very large number when neither is known.
+    """
+    env = os.environ.get(MEMORY_LIMIT_ENV)
+    if env:
+        try:
+            return int(float(env))
+        except ValueError:
+            raise ValueError(f"{MEMORY_LIMIT_ENV}={env!r} is not a number of bytes") from None
+    try:
+        import psutil
+
+        return int(psutil.virtual_memory().available)
+    except Exception:  # noqa: BLE001 - psutil missing or failing
+        pass
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 1 << 62
+
+
+def _fmt_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if abs(n) < 1024 or unit == "TiB":
+            return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.1f} TiB"  # pragma: no cover
+
+
+def check_memory(shape, source_itemsize: int, path, *, max_bytes=None) -> int:
+    """Raise before allocating if decoding ``shape`` would not fit in memory.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Shape of the decoded light field.
+    source_itemsize : int
+        Bytes per element of the data as stored (the float32 result needs 4
+        more per element, unless the source is float32 already).
+    path : str or Path
+        The file, for the message.
+    max_bytes : int, optional
+        Limit in bytes; default :func:`available_memory`.
+
+    Returns
+    -------
+    int
+        The estimated number of bytes.
+    """
+    n = int(np.prod([int(s) for s in shape], dtype=np.float64))
+    need = n * (int(source_itemsize) + 4)
+    limit = available_memory() if max_bytes is None else int(max_bytes)
+    if need > limit:
+        raise InsufficientMemoryError(
+            f"{path}: decoding a light field of shape {tuple(int(s) for s in shape)} needs about "
+            f"{_fmt_bytes(need)} but only {_fmt_bytes(limit)} is available; crop or downsample "
+            f"it first, or read it on a machine with more memory"
+        )
+    return need
+
+
+# ----------------------------------------------------------------- values
+
+
+def to_float01(arr, path, *, value_range=None) -> np.ndarray:
+    """Convert an array to float32 in [0, 1].
+
+    Integer data is divided by its dtype's maximum. Float data must already
+    lie in [0, 1] (overshoots of up to 1e-3 from rounding are clipped), unless
+    ``value_range=(lo, hi)`` maps ``lo`` to 0 and ``hi`` to 1, or
+    ``value_range='auto'`` uses the data's own minimum and maximum.
+
+    Raises
+    ------
+    LightFieldFormatError
+        On NaN or Inf, on a non-numeric dtype, or on float data outside
+        [0, 1] without a ``value_range``.
+    """
+    arr = np.asarray(arr)
+    if arr.dtype == bool:
+        return arr.astype(np.float32)
+    if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        raise LightFieldFormatError(f"{path}: unsupported data type {arr.dtype}; expected integers or floats")
+    if value_range is None and np.issubdtype(arr.dtype, np.integer):
+        info = np.iinfo(arr.dtype)
+        if info.min < 0 and arr.size and arr.min() < 0:
+            raise LightFieldFormatError(
+                f"{path}: signed integer data has negative values; pass value_range=(lo, hi)"
+            )
+        out = arr.astype(np.float32)
+        out *= np.float32(1.0 / info.max)
+        return out
+    out = arr.astype(np.float32, copy=arr.dtype != np.float32)
+    if out.size and not np.isfinite(out).all():
+        bad = int(np.count_nonzero(~np.isfinite(out)))
+        raise LightFieldFormatError(f"{path}: the data contains {bad} NaN or Inf value(s)")
+    if out.size == 0:
+        raise LightFieldFormatError(f"{path}: the light field is empty (shape {out.shape})")
+    if value_range is not None:
+        if isinstance(value_range, str):
+            if value_range != "auto":
+                raise ValueError(f"value_range must be (lo, hi) or 'auto', not {value_range!r}")
+            lo, hi = float(out.min()), float(out.max())
+        else:
+            lo, hi = (float(v) for v in value_range)
+        if not hi > lo:
+            hi = lo + 1.0
+        out = (out - np.float32(lo)) * np.float32(1.0 / (hi - lo))
+        np.clip(out, 0.0, 1.0, out=out)
+        return out
+    lo, hi = float(out.min()), float(out.max())
+    if lo < -1e-3 or hi > 1.0 + 1e-3:
+        raise LightFieldFormatError(
+            f"{path}: float values span [{lo:.4g}, {hi:.4g}], outside [0, 1]; pass "
+            f"value_range=(lo, hi) (e.g. (0, 255)) or value_range='auto' to rescale"
+        )
+    if lo < 0 or hi > 1:
+        np.clip(out, 0.0, 1.0, out=out)
+    return out
+
+
+def validate_lightfield(lf, path="light field") -> np.ndarray:
+    """Check the dimensions of a light field array; returns it as an ndarray.
+
+    A light field is ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` with C in 1, 3, 4
+    (a trailing C of 1 is dropped).
+    """
+    lf = np.asarray(lf)
+    if lf.ndim in (2, 3):
+        raise LightFieldFormatError(
+            f"{path}: got a {lf.ndim}D array of shape {lf.shape}; a light field is 4D (V, U, Y, X) "
+            f"or 5D (V, U, Y, X, C). A single image or a stack of views is not enough: arrange "
+            f"the views on a (V, U) grid"
+        )
+    if lf.ndim not in (4, 5):
+        raise LightFieldFormatError(
+            f"{path}: got a {lf.ndim}D array of shape {lf.shape}; expected 4D (V, U, Y, X) or 5D (V, U, Y, X, C)"
+        )
+    if lf.ndim == 5:
+        if lf.shape[-1] == 1:
+            lf = lf[..., 0]
+        elif lf.shape[-1] not in (3, 4):
+            raise LightFieldFormatError(
+                f"{path}: 5D array of shape {lf.shape} has {lf.shape[-1]} channels; expected 1, 3 or 4 "
+                f"(the layout is (V, U, Y, X, C))"
+            )
+    if min(lf.shape[:4]) < 1:
+        raise LightFieldFormatError(f"{path}: the light field is empty (shape {lf.shape})")
+    return lf
+
+
+# ----------------------------------------------------------------- atomic writes
+
+
+def _tmp_name(path: Path, suffix: str = "") -> Path:
+    return path.with_name(f".{path.name}.tmp{os.getpid()}{suffix}")
+
+
+def check_writable(path: Path, overwrite: bool) -> None:
+    """Raise FileExistsError unless ``path`` is free or ``overwrite`` is set."""
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    if not path.parent.exists():
+        raise FileNotFoundError(f"cannot write {path}: the folder {path.parent} does not exist")
+
+
+@contextmanager
+def atomic_file(path, *, overwrite=False):
+    """Yield a temporary path next to ``path``; rename it to ``path`` on success.
+
+    On any error the temporary file is removed and ``path`` is untouched.
+    The temporary name keeps the suffix of ``path`` (some writers need it).
+    """
+    path = Path(path)
+    check_writable(path, overwrite)
+    if path.is_dir():
+        raise IsADirectoryError(f"cannot write {path}: it is a folder")
+    tmp = _tmp_name(path, path.suffix)
+    try:
+        yield tmp
+        if path.exists() and not overwrite:  # appeared meanwhile
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+@contextmanager
+def atomic_dir(path, *, overwrite=False, replaceable=None):
+    """Yield a temporary folder next to ``path``; move it to ``path`` on success.
+
+    An existing folder is replaced only if ``overwrite`` and every entry in it
+    satisfies ``replaceable(name)`` (so that a user's other files are never
+    deleted). On error the temporary folder is removed.
+    """
+    path = Path(path)
+    check_writable(path, overwrite)
+    if path.exists():
+        if not path.is_dir():
+            raise FileExistsError(f"cannot write views to {path}: a file of that name exists")
+        foreign = [p.name for p in path.iterdir() if replaceable is None or not replaceable(p.name)]
+        if foreign:
+            raise FileExistsError(
+                f"{path} contains files that are not light-field views ({', '.join(sorted(foreign)[:3])}"
+                f"{', ...' if len(foreign) > 3 else ''}); refusing to replace it, choose another folder"
+            )
+    tmp = _tmp_name(path)
+    old = _tmp_name(path, ".old")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    try:
+        yield tmp
+        if path.exists():
+            os.replace(path, old)
+            try:
+                os.replace(tmp, path)
+            except BaseException:
+                os.replace(old, path)
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)

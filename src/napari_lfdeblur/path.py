@@ -1,0 +1,282 @@
+"""Camera paths: Bezier curves in R^3 (MODEL.md, "Camera path").
+
+A path ``p(t) = (p_x, p_y, p_z)`` for ``t`` in [0, 1] is a Bezier curve of
+``n >= 2`` control points, an ``(n, 3)`` array. ``p_x`` and ``p_y`` are in view
+units; ``p_z`` is in view units per unit of normalised image coordinate ``x~``.
+The exposure is sampled at ``T`` instants ``t_k = k / (T - 1)``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "validate_control_points",
+    "validate_n_times",
+    "sample_times",
+    "bernstein_matrix",
+    "bezier_positions",
+    "center_path",
+    "linear_path",
+    "arc_path",
+    "shake_path",
+    "random_path",
+    "preset_path",
+    "PRESETS",
+    "save_path_json",
+    "load_path_json",
+]
+
+
+def validate_control_points(control_points) -> np.ndarray:
+    """Check control points and return them as a float64 ``(n, 3)`` array.
+
+    Raises
+    ------
+    ValueError
+        If the array is not ``(n, 3)`` with ``n >= 2`` or holds NaN or Inf.
+    """
+    try:
+        cp = np.asarray(control_points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"control points must be numbers: {exc}") from None
+    if cp.ndim != 2 or cp.shape[1] != 3:
+        raise ValueError(
+            f"control points must be an (n, 3) array of (p_x, p_y, p_z); got shape {cp.shape}"
+        )
+    if cp.shape[0] < 2:
+        raise ValueError(
+            f"a Bezier path needs at least 2 control points; got {cp.shape[0]}"
+        )
+    if not np.all(np.isfinite(cp)):
+        raise ValueError("control points contain NaN or Inf")
+    return np.ascontiguousarray(cp)
+
+
+def validate_n_times(n_times) -> int:
+    """Check the number of exposure instants ``T`` (an integer >= 2)."""
+    if isinstance(n_times, bool) or not isinstance(n_times, (int, np.integer)):
+        raise ValueError(f"n_times must be an integer >= 2; got {n_times!r}")
+    if n_times < 2:
+        raise ValueError(f"n_times must be at least 2; got {n_times}")
+    return int(n_times)
+
+
+def sample_times(n_times: int) -> np.ndarray:
+    """The exposure instants ``t_k = k / (T - 1)``, a float64 ``(T,)`` array."""
+    n_times = validate_n_times(n_times)
+    return np.arange(n_times, dtype=np.float64) / (n_times - 1)
+
+
+def bernstein_matrix(n_points: int, n_times: int) -> np.ndarray:
+    """Bernstein basis ``M[k, i] = C(n-1, i) t_k^i (1 - t_k)^(n-1-i)``.
+
+    ``M @ control_points`` gives the path's positions at the ``T`` instants.
+
+    Returns
+    -------
+    ndarray, float64, shape (T, n)
+    """
+    t = sample_times(n_times)[:, None]
+    deg = n_points - 1
+    i = np.arange(n_points)[None, :]
+    binom = np.array([math.comb(deg, k) for k in range(n_points)], dtype=np.float64)
+    return binom * t**i * (1.0 - t) ** (deg - i)
+
+
+def bezier_positions(control_points, n_times: int):
+    """Positions of the Bezier path at the ``T`` exposure instants.
+
+    Parameters
+    ----------
+    control_points : array_like or torch.Tensor, shape (n, 3)
+        A torch tensor stays a tensor (differentiable); anything else gives
+        a numpy array.
+    n_times : int
+        Number of instants ``T >= 2``.
+
+    Returns
+    -------
+    ndarray or torch.Tensor, shape (T, 3)
+        ``(p_x, p_y, p_z)`` at ``t_k = k / (T - 1)``.
+
+    Examples
+    --------
+    >>> bezier_positions([[0, 0, 0], [2, 0, 0]], 3)
+    array([[0., 0., 0.],
+           [1., 0., 0.],
+           [2., 0., 0.]])
+    """
+    try:
+        import torch
+    except ImportError:  # pragma: no cover - torch is a dependency
+        torch = None
+    if torch is not None and isinstance(control_points, torch.Tensor):
+        if control_points.ndim != 2 or control_points.shape[1] != 3 or control_points.shape[0] < 2:
+            raise ValueError(
+                f"control points must be an (n, 3) tensor with n >= 2; got {tuple(control_points.shape)}"
+            )
+        basis = torch.as_tensor(
+            bernstein_matrix(control_points.shape[0], n_times),
+            dtype=control_points.dtype,
+            device=control_points.device,
+        )
+        return basis @ control_points
+    cp = validate_control_points(control_points)
+    return bernstein_matrix(cp.shape[0], n_times) @ cp
+
+
+def center_path(control_points, n_times: int = 32) -> np.ndarray:
+    """Move a path to the zero-mean gauge of MODEL.md.
+
+    The mean of ``p(t_k)`` over the ``T`` instants becomes 0. Bernstein weights
+    sum to one, so subtracting that mean from every control point shifts the
+    whole curve by it.
+
+    Returns
+    -------
+    ndarray, float64, shape (n, 3)
+    """
+    cp = validate_control_points(control_points)
+    return cp - bezier_positions(cp, n_times).mean(axis=0)
+
+
+# ---------------------------------------------------------------- presets
+
+
+def linear_path(length: float = 2.0, angle_deg: float = 0.0, z: float = 0.0) -> np.ndarray:
+    """A straight in-plane motion of ``length`` views at ``angle_deg``, centred.
+
+    ``z`` adds a linear out-of-plane motion from ``-z/2`` to ``+z/2``.
+
+    Returns
+    -------
+    ndarray, float64, shape (2, 3)
+    """
+    a = math.radians(angle_deg)
+    d = np.array([math.cos(a), math.sin(a), 0.0]) * length / 2.0
+    d[2] = z / 2.0
+    return np.stack([-d, d])
+
+
+def arc_path(length: float = 2.0, bend: float = 0.5, angle_deg: float = 0.0) -> np.ndarray:
+    """A quadratic arc: a chord of ``length`` views bowed by ``bend * length``.
+
+    Returns
+    -------
+    ndarray, float64, shape (3, 3), in the zero-mean gauge for T = 32
+    """
+    a = math.radians(angle_deg)
+    along = np.array([math.cos(a), math.sin(a), 0.0])
+    across = np.array([-math.sin(a), math.cos(a), 0.0])
+    cp = np.stack(
+        [-along * length / 2, across * 2 * bend * length, along * length / 2]
+    )
+    return center_path(cp)
+
+
+def shake_path(extent: float = 2.0, seed: int = 0, n_points: int = 5, z: float = 0.0) -> np.ndarray:
+    """A hand-shake-like wiggle: random control points within ``extent`` views.
+
+    Returns
+    -------
+    ndarray, float64, shape (n_points, 3), in the zero-mean gauge for T = 32
+    """
+    return random_path(n_points=n_points, extent=extent, z_extent=z, seed=seed)
+
+
+def random_path(
+    n_points: int = 4, extent: float = 2.0, z_extent: float = 0.0, seed: int | None = 0
+) -> np.ndarray:
+    """A random Bezier path in the zero-mean gauge.
+
+    Control points are drawn uniformly in a box of side ``extent`` views in
+    x and y, and ``z_extent`` in z.
+
+    Returns
+    -------
+    ndarray, float64, shape (n_points, 3)
+    """
+    if n_points < 2:
+        raise ValueError(f"a Bezier path needs at least 2 control points; got {n_points}")
+    rng = np.random.default_rng(seed)
+    cp = rng.uniform(-0.5, 0.5, size=(n_points, 3)) * np.array([extent, extent, z_extent])
+    return center_path(cp)
+
+
+PRESETS = {
+    "linear": linear_path,
+    "arc": arc_path,
+    "shake": shake_path,
+    "random": random_path,
+}
+
+
+def preset_path(name: str, extent: float = 2.0, seed: int = 0) -> np.ndarray:
+    """A named preset path (``linear``, ``arc``, ``shake`` or ``random``).
+
+    ``extent`` is the motion's size in views.
+    """
+    if name == "linear":
+        return linear_path(length=extent)
+    if name == "arc":
+        return arc_path(length=extent)
+    if name == "shake":
+        return shake_path(extent=extent, seed=seed)
+    if name == "random":
+        return random_path(extent=extent, seed=seed)
+    raise ValueError(f"unknown path preset {name!r}: choose one of {sorted(PRESETS)}")
+
+
+# ---------------------------------------------------------------- JSON
+
+
+def save_path_json(path, control_points, *, overwrite: bool = False, **extra) -> Path:
+    """Write control points to a JSON file, with units and any ``extra`` fields.
+
+    The file is written to a temporary name and renamed, so a failure leaves
+    no half-written file. An existing file is kept unless ``overwrite``.
+    """
+    cp = validate_control_points(control_points)
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    doc = {
+        "control_points": cp.tolist(),
+        "units": "p_x, p_y in views; p_z in views per unit of normalised x~ (MODEL.md)",
+        **extra,
+    }
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    try:
+        tmp.write_text(json.dumps(doc, indent=2))
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def load_path_json(path) -> np.ndarray:
+    """Read control points from a JSON file written by :func:`save_path_json`.
+
+    A bare list of ``[p_x, p_y, p_z]`` triples is accepted too.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"path file {path} does not exist")
+    try:
+        doc = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path} is not valid JSON: {exc}") from None
+    cp = doc.get("control_points") if isinstance(doc, dict) else doc
+    if cp is None:
+        raise ValueError(f"{path} has no 'control_points' entry")
+    try:
+        return validate_control_points(cp)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None

@@ -1,0 +1,149 @@
+"""The forward model against MODEL.md: brute force, special cases, ambiguities, gradients, adjoint."""
+
+import numpy as np
+import pytest
+import torch
+
+from _reference import blur_reference
+from napari_lfdeblur import random_path, simulate_blur
+from napari_lfdeblur.blur import BlurOperator, to_tensor
+from napari_lfdeblur.path import bezier_positions, center_path
+
+
+@pytest.mark.parametrize("shape", [(5, 4, 7, 9), (3, 5, 6, 5, 3)], ids=["gray", "colour"])
+@pytest.mark.parametrize("d_inf", [0.0, 0.7, -1.3])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_simulate_blur_matches_brute_force(shape, d_inf, seed):
+    rng = np.random.default_rng(seed)
+    lf = rng.random(shape).astype(np.float32)
+    cp = random_path(n_points=int(rng.integers(2, 5)), extent=3.0, z_extent=2.0, seed=seed + 10)
+    got = simulate_blur(lf, cp, n_times=7, infinity_disparity=d_inf, device="cpu")
+    want = blur_reference(lf, cp, 7, d_inf)
+    assert got.dtype == np.float32 and got.shape == lf.shape
+    np.testing.assert_allclose(got, want, atol=1e-5)
+
+
+def test_small_blocks_give_the_same_result():
+    rng = np.random.default_rng(3)
+    lf = torch.rand(4, 5, 11, 6, 2, dtype=torch.float64)
+    cp = random_path(3, extent=2.0, z_extent=1.0, seed=2)
+    big = BlurOperator(lf.shape, cp, n_times=5, device="cpu", dtype=torch.float64)
+    tiny = BlurOperator(lf.shape, cp, n_times=5, device="cpu", dtype=torch.float64, block_elements=1)
+    torch.testing.assert_close(big.forward(lf), tiny.forward(lf))
+    y = torch.from_numpy(rng.random(lf.shape))
+    torch.testing.assert_close(big.adjoint(y), tiny.adjoint(y))
+
+
+def test_zero_path_is_identity():
+    lf = np.random.default_rng(0).random((5, 5, 8, 9, 3)).astype(np.float32)
+    for d_inf in (0.0, 1.5):
+        out = simulate_blur(lf, np.zeros((3, 3)), n_times=4, infinity_disparity=d_inf)
+        np.testing.assert_array_equal(out, lf)
+
+
+def test_constant_integer_path_is_an_exact_view_shift():
+    lf = np.random.default_rng(1).random((5, 6, 8, 8)).astype(np.float32)
+    out = simulate_blur(lf, [[2, -1, 0], [2, -1, 0]], n_times=3)
+    # f[v, u] = l[clamp(v - 1), clamp(u + 2)]
+    v = np.clip(np.arange(5) - 1, 0, 4)
+    u = np.clip(np.arange(6) + 2, 0, 5)
+    np.testing.assert_allclose(out, lf[v][:, u], rtol=0, atol=1e-6)  # float32 mean of equal terms
+
+
+def test_time_reversal_and_reordering_give_the_same_blur():
+    lf = np.random.default_rng(2).random((5, 5, 10, 10)).astype(np.float32)
+    cp = random_path(4, extent=3.0, z_extent=1.0, seed=5)
+    fwd = simulate_blur(lf, cp, n_times=9, infinity_disparity=0.4)
+    rev = simulate_blur(lf, cp[::-1], n_times=9, infinity_disparity=0.4)
+    np.testing.assert_allclose(fwd, rev, atol=1e-6)
+    # any reordering of the visited positions: compare a sum of constant-path blurs
+    pos = bezier_positions(cp, 9)
+    acc = sum(simulate_blur(lf, [p, p], n_times=2, infinity_disparity=0.4) for p in pos[::-1])
+    np.testing.assert_allclose(fwd, acc / 9, atol=1e-5)
+
+
+def test_constant_offset_ambiguity():
+    """blur(l, p + c) == blur(view of l from c, p) away from the aperture border.
+
+    With an integer in-plane offset c, viewing from c is an exact view shift,
+    so the identity holds wherever no sample was clamped.
+    """
+    lf = np.random.default_rng(3).random((9, 9, 8, 8)).astype(np.float32)
+    cp = random_path(3, extent=1.0, seed=4)  # positions within about +-0.5 views
+    c = np.array([1.0, -1.0, 0.0])
+    shifted = simulate_blur(lf, cp + c, n_times=8)
+    moved = simulate_blur(lf, [c, c], n_times=2)
+    other = simulate_blur(moved, cp, n_times=8)
+    inner = (slice(2, -2), slice(2, -2))
+    np.testing.assert_allclose(shifted[inner], other[inner], atol=1e-6)
+
+
+def test_center_path_zero_mean():
+    cp = random_path(4, extent=3.0, z_extent=1.0, seed=1) + 5.0
+    centred = center_path(cp, n_times=11)
+    np.testing.assert_allclose(bezier_positions(centred, 11).mean(axis=0), 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("d_inf", [0.0, 0.6])
+def test_gradcheck_lightfield_and_path(d_inf):
+    torch.manual_seed(0)
+    lf = torch.rand(3, 4, 5, 4, 1, dtype=torch.float64, requires_grad=True)
+    # keep away from integer sample positions, where bilinear weights have kinks
+    cp = torch.tensor(random_path(3, extent=1.3, z_extent=0.7, seed=7) + 0.137,
+                      dtype=torch.float64, requires_grad=True)
+
+    def f(lf, cp):
+        return BlurOperator(lf.shape, cp, n_times=4, infinity_disparity=d_inf, dtype=torch.float64).forward(lf)
+
+    assert torch.autograd.gradcheck(f, (lf, cp), eps=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("d_inf", [0.0, 0.8])
+def test_adjoint(d_inf):
+    gen = torch.Generator().manual_seed(1)
+    shape = (4, 5, 7, 6, 3)
+    x = torch.rand(shape, generator=gen, dtype=torch.float64)
+    y = torch.rand(shape, generator=gen, dtype=torch.float64)
+    op = BlurOperator(shape, random_path(4, 3.0, 2.0, seed=2), n_times=6,
+                      infinity_disparity=d_inf, device="cpu", dtype=torch.float64)
+    lhs = torch.sum(op.forward(x) * y)
+    rhs = torch.sum(x * op.adjoint(y))
+    assert abs(float(lhs - rhs)) < 1e-10 * float(abs(lhs))
+
+
+def test_adjoint_equals_autograd_vjp():
+    shape = (3, 4, 5, 6, 1)
+    x = torch.rand(shape, dtype=torch.float64, requires_grad=True)
+    y = torch.rand(shape, dtype=torch.float64)
+    op = BlurOperator(shape, random_path(3, 2.0, 1.0, seed=0), n_times=5, device="cpu", dtype=torch.float64)
+    (g,) = torch.autograd.grad(op.forward(x), x, y)
+    torch.testing.assert_close(op.adjoint(y), g)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(lf=np.zeros((4, 4, 4))), "4D"),
+        (dict(lf=np.full((3, 3, 4, 4), np.nan)), "NaN"),
+        (dict(control_points=[[0, 0, 0]]), "at least 2"),
+        (dict(control_points=[[0, 0], [1, 1]]), r"\(n, 3\)"),
+        (dict(control_points=[[0, 0, np.nan], [1, 1, 0]]), "NaN"),
+        (dict(n_times=1), "n_times"),
+        (dict(n_times=2.5), "n_times"),
+        (dict(infinity_disparity="far"), "infinity_disparity"),
+    ],
+)
+def test_bad_input_gives_clear_errors(kwargs, message):
+    args = dict(lf=np.zeros((3, 3, 4, 4)), control_points=[[0, 0, 0], [1, 0, 0]], n_times=4)
+    args.update(kwargs)
+    lf = args.pop("lf")
+    cp = args.pop("control_points")
+    with pytest.raises(ValueError, match=message):
+        simulate_blur(lf, cp, **args)
+
+
+def test_operator_rejects_wrong_shape():
+    op = BlurOperator((3, 3, 4, 4), [[0, 0, 0], [1, 0, 0]], n_times=3, device="cpu")
+    with pytest.raises(ValueError, match="shape"):
+        op.forward(torch.zeros(3, 3, 4, 5, 1))
+    assert to_tensor(np.zeros((3, 3, 4, 4))).shape == (3, 3, 4, 4, 1)
