@@ -1,0 +1,182 @@
+"""Metrics against hand-computed values and the ambiguities of MODEL.md."""
+
+import math
+
+import numpy as np
+import pytest
+
+from napari_lfdeblur import path_error, psnr, random_path, ssim
+from napari_lfdeblur.metrics import PathError, angular_error, chamfer_distance
+from napari_lfdeblur.path import linear_path
+
+
+# ------------------------------------------------------------------ PSNR
+
+
+def test_psnr_of_a_known_mse():
+    ref = np.zeros((3, 3, 8, 8), np.float32)
+    est = ref + 0.1  # MSE = 0.01
+    assert psnr(est, ref) == pytest.approx(20.0, abs=1e-4)
+    assert psnr(est, ref, data_range=2.0) == pytest.approx(10 * math.log10(4 / 0.01), abs=1e-4)
+    # half the samples off by 0.2: MSE = 0.02
+    est2 = ref.copy()
+    est2[:, :, :4] = 0.2
+    assert psnr(est2, ref) == pytest.approx(10 * math.log10(1 / 0.02), abs=1e-4)
+
+
+def test_psnr_identical_is_infinite_and_crop_removes_only_spatial_borders():
+    rng = np.random.default_rng(0)
+    ref = rng.random((2, 3, 10, 12, 3)).astype(np.float32)
+    assert psnr(ref, ref) == math.inf
+    est = ref.copy()
+    est[:, :, 0] += 0.5  # top row of every view
+    est[:, :, :, -2:] -= 0.5  # two right columns
+    assert psnr(est, ref) < 20
+    assert psnr(est, ref, crop=1) < 20  # the right columns are still inside
+    assert psnr(est, ref, crop=2) == math.inf
+    # a 2D image: its own axes are the spatial ones
+    img = rng.random((9, 9))
+    bad = img.copy()
+    bad[0] = 0
+    assert psnr(bad, img, crop=1) == math.inf
+
+
+def test_psnr_and_ssim_reject_bad_input():
+    a = np.zeros((3, 3, 8, 8))
+    with pytest.raises(ValueError, match="shapes differ"):
+        psnr(a, np.zeros((3, 3, 8, 7)))
+    with pytest.raises(ValueError, match="crop"):
+        psnr(a, a, crop=4)
+    with pytest.raises(ValueError, match="crop"):
+        ssim(a, a, crop=-1)
+    b = a.copy()
+    b[0, 0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        psnr(b, a)
+    with pytest.raises(ValueError, match="6D"):
+        psnr(np.zeros((1,) * 6), np.zeros((1,) * 6))
+
+
+# ------------------------------------------------------------------ SSIM
+
+
+def test_ssim_is_one_for_equal_and_the_mean_over_views():
+    rng = np.random.default_rng(1)
+    ref = rng.random((2, 2, 16, 16)).astype(np.float32)
+    assert ssim(ref, ref) == pytest.approx(1.0)
+    # one view in four replaced by a constant image: SSIM of that view is
+    # c1 / (var + c1) for an estimate with zero variance and the same mean ...
+    est = ref.copy()
+    est[1, 1] = ref[1, 1].mean()
+    s_view = ssim(est[1, 1], ref[1, 1])
+    assert 0 <= s_view < 0.1
+    # ... and the light field's SSIM is the mean of the four views' values
+    assert ssim(est, ref) == pytest.approx((3 + s_view) / 4, abs=1e-9)
+
+
+def test_ssim_colour_averages_channels_and_falls_with_noise():
+    rng = np.random.default_rng(2)
+    ref = rng.random((2, 2, 12, 12, 3))
+    est = ref.copy()
+    est[..., 2] = 1 - ref[..., 2]  # one channel inverted
+    s_inv = ssim(est[..., 2], ref[..., 2])
+    assert s_inv < 0
+    assert ssim(est, ref) == pytest.approx((2 + s_inv) / 3, abs=1e-9)
+    small = ssim(ref + rng.normal(0, 0.02, ref.shape), ref)
+    large = ssim(ref + rng.normal(0, 0.2, ref.shape), ref)
+    assert 1 > small > large
+
+
+# ---------------------------------------------------------- angular error
+
+
+def test_angular_error_ignores_common_errors_and_sees_per_view_ones():
+    rng = np.random.default_rng(3)
+    V, U, Y, X = 3, 4, 5, 6
+    ref = rng.random((V, U, Y, X))
+    common = rng.normal(0, 0.1, (Y, X))  # same error in every view
+    assert angular_error(ref + common, ref) == pytest.approx(0.0, abs=1e-12)
+    a = 0.05
+    est = ref + a * np.arange(U)[None, :, None, None]  # error grows by a per view column
+    n_u = V * (U - 1) * Y * X
+    n_v = (V - 1) * U * Y * X
+    want = math.sqrt(n_u * a**2 / (n_u + n_v))
+    assert angular_error(est, ref) == pytest.approx(want, rel=1e-9)
+    with pytest.raises(ValueError, match="light fields"):
+        angular_error(ref[0, 0], ref[0, 0])
+
+
+# ----------------------------------------------------------------- Chamfer
+
+
+def test_chamfer_hand_cases():
+    assert chamfer_distance([[0, 0]], [[1, 0], [3, 0]]) == pytest.approx(0.5 * (1 + 2))
+    a = [[0, 0, 0], [1, 0, 0]]
+    assert chamfer_distance(a, a) == 0.0
+    # unit squares 3 apart in y: the near side's points are 2 away, the far side's 3
+    sq = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
+    assert chamfer_distance(sq, sq + [0, 3]) == pytest.approx(2.5)
+    with pytest.raises(ValueError):
+        chamfer_distance(np.zeros((0, 2)), sq)
+
+
+# -------------------------------------------------------------- path error
+
+
+def test_identical_reversed_and_offset_paths_have_zero_error():
+    rng = np.random.default_rng(4)
+    lf = rng.random((5, 5, 12, 12)).astype(np.float32)
+    cp = random_path(4, extent=3.0, z_extent=1.0, seed=3)
+    for est in (cp, cp[::-1], cp + [0.7, -1.2, 0.3], cp[::-1] - [0.5, 0.5, 0.0]):
+        err = path_error(est, cp, n_times=16, lightfield=lf)
+        assert isinstance(err, PathError)
+        assert err.chamfer == pytest.approx(0.0, abs=1e-9)
+        assert err.rmse == pytest.approx(0.0, abs=1e-9)
+        assert err.rmse_relative == pytest.approx(0.0, abs=1e-9)
+        assert err.blur_mismatch == pytest.approx(0.0, abs=1e-4)
+    assert path_error(cp[::-1], cp).reversed
+    assert not path_error(cp, cp).reversed
+    assert path_error(cp, cp).blur_mismatch is None
+
+
+def test_path_error_hand_case_perpendicular_lines():
+    # T = 3 instants: est visits (-1,0),(0,0),(1,0); true visits (0,-1),(0,0),(0,1)
+    est = linear_path(2.0, angle_deg=0.0)
+    true = linear_path(2.0, angle_deg=90.0)
+    err = path_error(est, true, n_times=3)
+    assert err.chamfer == pytest.approx(2 / 3)
+    assert err.rmse == pytest.approx(math.sqrt(4 / 3))
+    assert err.extent == pytest.approx(2.0)
+    assert err.rmse_relative == pytest.approx(math.sqrt(4 / 3) / 2)
+    assert err.chamfer_relative == pytest.approx(1 / 3)
+
+
+def test_path_error_same_curve_with_more_control_points():
+    two = np.array([[-1.0, 0.5, 0.0], [1.0, -0.5, 0.2]])
+    three = np.array([two[0], two.mean(0), two[1]])  # degree-elevated: the same curve
+    err = path_error(three, two, n_times=20)
+    assert err.chamfer == pytest.approx(0.0, abs=1e-12)
+    assert err.rmse == pytest.approx(0.0, abs=1e-12)
+
+
+def test_blur_mismatch_of_no_motion_is_one_and_of_a_static_truth_is_nan():
+    rng = np.random.default_rng(5)
+    lf = rng.random((5, 5, 10, 10, 2)).astype(np.float32)
+    true = linear_path(2.0, angle_deg=30.0)
+    # the zero path leaves lf as it is: ||lf - B(lf)|| / ||B(lf) - lf|| = 1
+    err = path_error(np.zeros((2, 3)), true, n_times=8, lightfield=lf)
+    assert err.blur_mismatch == pytest.approx(1.0, rel=1e-5)
+    # a half-length estimate is in between
+    half = path_error(linear_path(1.0, angle_deg=30.0), true, n_times=8, lightfield=lf)
+    assert 0.1 < half.blur_mismatch < 0.9
+    static = path_error(true, np.zeros((2, 3)), n_times=8, lightfield=lf)
+    assert math.isnan(static.blur_mismatch)
+    assert math.isnan(static.rmse_relative) and static.extent == 0.0
+    assert set(static.as_dict()) >= {"chamfer", "rmse_relative", "blur_mismatch"}
+
+
+def test_path_error_rejects_bad_paths():
+    with pytest.raises(ValueError, match=r"\(n, 3\)"):
+        path_error(np.zeros((3, 2)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="n_times"):
+        path_error(np.zeros((2, 3)), np.zeros((2, 3)), n_times=1)
