@@ -54,6 +54,7 @@ _PUBLIC = {
     "psnr": "metrics",
     "ssim": "metrics",
     "path_error": "metrics",
+    "angular_error": "metrics",
     # devices
     "select_device": "devices",
 }
