@@ -1,0 +1,312 @@
+"""Reading and writing light fields.
+
+:func:`read_lightfield` turns any supported layout into a ``(V, U, Y, X)`` or
+``(V, U, Y, X, C)`` float32 array in [0, 1] (see ``MODEL.md``);
+:func:`write_lightfield` writes one back. Supported layouts (the names that
+:func:`detect_layout` returns and ``layout=`` accepts):
+
+============  ==============================================================
+``views``     folder of ``..._RR_CC.png`` views (1-based; Lytro toolbox names)
+``hci``       folder of HCI benchmark ``input_CamNNN.png`` (+ parameters.cfg)
+``stanford``  folder of Stanford gantry ``out_RR_CC_*.png`` (0-based)
+``eslf``      lenslet mosaic ``*.eslf.png``: pixel ``(y*A + v, x*A + u)``
+``mosaic``    views tiled in one image: pixel ``(v*Y + y, u*X + x)``
+``mat``       Light Field Toolbox ``.mat`` (MATLAB v5 or v7.3), variable LF
+``h5``        HDF5 dataset ``LF`` (or the only 4D/5D one)
+``npy``       ``.npy`` array
+``npz``       ``.npz`` array ``lf`` (or the only array)
+``tiff``      4D/5D TIFF
+============  ==============================================================
+
+Errors are :class:`LightFieldError` (a ``ValueError``) or one of its
+subclasses, or ``FileNotFoundError``; each message names the file and what is
+wrong with it.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ._common import (
+    MEMORY_LIMIT_ENV,
+    InsufficientMemoryError,
+    LightFieldError,
+    LightFieldFormatError,
+    LightFieldReadError,
+    available_memory,
+)
+from ._write import write_lightfield
+
+__all__ = [
+    "read_lightfield",
+    "read_lightfield_with_metadata",
+    "write_lightfield",
+    "detect_layout",
+    "probe_layout",
+    "LAYOUTS",
+    "LightFieldError",
+    "LightFieldFormatError",
+    "LightFieldReadError",
+    "InsufficientMemoryError",
+    "MEMORY_LIMIT_ENV",
+    "available_memory",
+]
+
+LAYOUTS = ("views", "hci", "stanford", "eslf", "mosaic", "mat", "h5", "npy", "npz", "tiff")
+
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
+_SUFFIX_LAYOUT = {
+    ".npy": "npy",
+    ".npz": "npz",
+    ".tif": "tiff",
+    ".tiff": "tiff",
+    ".h5": "h5",
+    ".hdf5": "h5",
+    ".he5": "h5",
+    ".mat": "mat",
+}
+
+# options each layout's reader accepts, besides value_range and max_bytes
+_OPTIONS = {
+    "views": ("scheme", "pattern", "index_base", "grid", "workers"),
+    "hci": ("pattern", "index_base", "grid", "workers"),
+    "stanford": ("pattern", "index_base", "grid", "workers"),
+    "eslf": ("angular_size", "angular_crop"),
+    "mosaic": ("grid",),
+    "mat": ("variable", "drop_weight"),
+    "h5": ("dataset", "axes"),
+    "npy": ("axes",),
+    "npz": ("key", "axes"),
+    "tiff": ("axes",),
+}
+
+
+def _as_path(path) -> Path:
+    if isinstance(path, (list, tuple)):
+        if len(path) != 1:
+            raise ValueError(f"expected one path, got {len(path)}")
+        path = path[0]
+    try:
+        return Path(os.fspath(path)).expanduser()
+    except TypeError:
+        raise TypeError(f"expected a file or folder path, not {type(path).__name__}") from None
+
+
+def detect_layout(path) -> str:
+    """Name the layout of a light-field file or folder (one of :data:`LAYOUTS`).
+
+    Looks at names and suffixes only, never at pixel data.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    LightFieldFormatError
+        If the layout cannot be told (for instance a plain image, which may be
+        an ESLF or a view-grid mosaic: pass ``layout=``).
+    """
+    from ._views import probe_scheme
+
+    path = _as_path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file or folder")
+    if path.is_dir():
+        scheme = probe_scheme(path)
+        if scheme is None:
+            raise LightFieldFormatError(
+                f"{path}: the folder holds no light-field views (expected image names like view_RR_CC.png, "
+                f"IMG_0001_001_RR_CC.png, input_CamNNN.png or out_RR_CC_*.png)"
+            )
+        return {"rc": "views", "hci": "hci", "stanford": "stanford"}[scheme]
+    name = path.name.lower()
+    suffix = path.suffix.lower()
+    if suffix in _SUFFIX_LAYOUT:
+        return _SUFFIX_LAYOUT[suffix]
+    if suffix in _IMAGE_SUFFIXES:
+        if "eslf" in name:
+            return "eslf"
+        raise LightFieldFormatError(
+            f"{path}: a single image is not a light field by itself; if it is a lenslet mosaic pass "
+            f"layout='eslf' (angular_size=A), if it is a grid of views pass layout='mosaic', grid=(V, U)"
+        )
+    raise LightFieldFormatError(
+        f"{path}: unknown light-field file type {suffix or '(no suffix)'!r}; supported: folders of views, "
+        f".eslf.png, .mat, .h5/.hdf5, .npy, .npz, .tif/.tiff"
+    )
+
+
+def probe_layout(path) -> str | None:
+    """The layout of ``path`` if it holds a light field we can read, else None.
+
+    Never raises. Checks headers (array dimensions, dataset names) so that
+    ordinary 2D/3D images and arrays are *not* claimed; used by the napari
+    reader.
+    """
+    try:
+        layout = detect_layout(path)
+        p = _as_path(path)
+        if layout == "npy":
+            arr = np.load(p, mmap_mode="r", allow_pickle=False)
+            ok = arr.ndim in (4, 5)
+            del arr
+            return layout if ok else None
+        if layout == "npz":
+            from ._arrays import _npz_headers, npz_lightfield_key
+
+            headers = _npz_headers(p)
+            key = npz_lightfield_key(p, headers)
+            return layout if key is not None and len(headers[key][0]) in (4, 5) else None
+        if layout == "tiff":
+            from ._arrays import tiff_shape
+
+            shape, _dtype, meta = tiff_shape(p)
+            return layout if len(shape) in (4, 5) else None
+        if layout == "h5":
+            import h5py
+
+            from ._arrays import h5_lightfield_name
+
+            with h5py.File(p, "r") as f:
+                name = h5_lightfield_name(f)
+                return layout if name is not None and f[name].ndim in (4, 5) else None
+        if layout == "mat":
+            from ._matlab import _is_hdf5
+
+            if _is_hdf5(p):
+                import h5py
+
+                with h5py.File(p, "r") as f:
+                    return layout if "LF" in f and getattr(f["LF"], "ndim", 0) in (4, 5) else None
+            import scipy.io
+
+            return layout if any(n == "LF" and len(s) in (4, 5) for n, s, _c in scipy.io.whosmat(p)) else None
+        return layout
+    except Exception:  # noqa: BLE001 - a probe never raises
+        return None
+
+
+def read_lightfield_with_metadata(path, *, layout: str | None = None, value_range=None, max_bytes=None,
+                                  **options) -> tuple[np.ndarray, dict]:
+    """Read a light field and describe where it came from.
+
+    Parameters are those of :func:`read_lightfield`.
+
+    Returns
+    -------
+    lf : ndarray, (V, U, Y, X) or (V, U, Y, X, C), float32 in [0, 1]
+    metadata : dict
+        JSON-serialisable: ``source`` (the path), ``layout``, ``shape``,
+        ``dtype``, ``file_dtype`` (as stored), and layout-specific entries,
+        such as ``camera`` (camera parameters when the file has them).
+    """
+    path = _as_path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file or folder")
+    if layout is None:
+        layout = detect_layout(path)
+    elif layout not in LAYOUTS:
+        raise ValueError(f"unknown layout {layout!r}; choose one of {LAYOUTS}")
+    allowed = _OPTIONS[layout]
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise TypeError(
+            f"option(s) {unknown} do not apply to layout {layout!r}; it accepts {list(allowed)} "
+            f"plus value_range and max_bytes"
+        )
+    if path.is_dir() != (layout in ("views", "hci", "stanford")):
+        raise LightFieldFormatError(
+            f"{path}: layout {layout!r} expects a {'folder' if layout in ('views', 'hci', 'stanford') else 'file'}"
+        )
+    common = {"value_range": value_range, "max_bytes": max_bytes}
+    if layout in ("views", "hci", "stanford"):
+        from ._views import read_views
+
+        scheme = options.pop("scheme", None) or {"views": "rc", "hci": "hci", "stanford": "stanford"}[layout]
+        lf, meta = read_views(path, scheme=scheme, **options, **common)
+    elif layout == "eslf":
+        from ._mosaic import read_eslf
+
+        lf, meta = read_eslf(path, **options, **common)
+    elif layout == "mosaic":
+        from ._mosaic import read_mosaic
+
+        lf, meta = read_mosaic(path, **options, **common)
+    elif layout == "mat":
+        from ._matlab import read_mat
+
+        lf, meta = read_mat(path, **options, **common)
+    else:
+        from . import _arrays
+
+        reader = {"h5": _arrays.read_h5, "npy": _arrays.read_npy, "npz": _arrays.read_npz,
+                  "tiff": _arrays.read_tiff}[layout]
+        lf, meta = reader(path, **options, **common)
+    metadata = {
+        "source": str(path.resolve()),
+        "layout": meta.pop("layout", layout),
+        "shape": list(lf.shape),
+        "dtype": str(lf.dtype),
+        **meta,
+    }
+    return lf, metadata
+
+
+def read_lightfield(path, *, layout: str | None = None, value_range=None, max_bytes=None, **options) -> np.ndarray:
+    """Read a light field from any supported layout.
+
+    Parameters
+    ----------
+    path : str or Path
+        A file or a folder of views.
+    layout : str, optional
+        One of :data:`LAYOUTS`; detected from the path by default
+        (:func:`detect_layout`).
+    value_range : (float, float) or 'auto', optional
+        Map this range of stored values to [0, 1]. By default integers are
+        divided by their dtype's maximum and floats must lie in [0, 1].
+    max_bytes : int, optional
+        Memory the decoded light field may use; by default the available
+        memory (or the ``LFDEBLUR_MEMORY_LIMIT`` environment variable). The
+        check runs before any pixel data is decoded.
+    **options
+        Layout-specific overrides:
+
+        - folders (``views``, ``hci``, ``stanford``): ``pattern`` (regex with
+          groups ``row``, ``col``), ``index_base`` (0 or 1), ``grid``
+          ``(V, U)``, ``workers`` (decoding threads);
+        - ``eslf``: ``angular_size`` (lenslet size A, default 14 or detected),
+          ``angular_crop`` (keep the central n x n views);
+        - ``mosaic``: ``grid`` ``(V, U)`` (required);
+        - ``mat``: ``variable`` (default ``'LF'``), ``drop_weight`` (default True);
+        - ``h5``: ``dataset``, ``axes`` (e.g. ``'vuyxc'``; default from the
+          dataset's ``axes`` attribute, else v, u, y, x, c);
+        - ``npz``: ``key``, ``axes``; ``npy``, ``tiff``: ``axes``.
+
+    Returns
+    -------
+    ndarray
+        ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` float32 in [0, 1].
+
+    Raises
+    ------
+    FileNotFoundError
+        The path does not exist.
+    LightFieldFormatError
+        Missing view, views of different sizes or dtypes, 2D/3D data, NaN or
+        Inf, undetectable layout.
+    LightFieldReadError
+        Truncated, corrupt or non-image file (also an ``OSError``).
+    InsufficientMemoryError
+        The decoded light field would not fit in memory.
+
+    Examples
+    --------
+    >>> lf = read_lightfield("IMG_0001/")                      # doctest: +SKIP
+    >>> lf = read_lightfield("scene.eslf.png", angular_crop=9)  # doctest: +SKIP
+    >>> lf = read_lightfield("grid.png", layout="mosaic", grid=(9, 9))  # doctest: +SKIP
+    """
+    return read_lightfield_with_metadata(path, layout=layout, value_range=value_range, max_bytes=max_bytes,
+                                         **options)[0]

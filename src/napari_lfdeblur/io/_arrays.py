@@ -1,0 +1,287 @@
+"""Array files: ``.npy``, ``.npz``, TIFF (4D/5D) and HDF5.
+
+Shapes and dtypes are read from the headers first, so the memory check runs
+before any pixel data is loaded.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ._common import LightFieldFormatError, LightFieldReadError, check_memory, to_float01, validate_lightfield
+
+_AXIS_ALIASES = {"v": "v", "u": "u", "y": "y", "x": "x", "c": "c", "s": "c", "channel": "c", "channels": "c",
+                 "rgb": "c", "color": "c", "colour": "c"}
+METADATA_KEY = "lfdeblur_metadata"  # JSON metadata stored by write_lightfield
+
+
+def parse_axes(axes, ndim, path) -> tuple[int, ...] | None:
+    """Permutation that takes an array whose axes are named ``axes`` to
+    ``(v, u, y, x[, c])``. ``axes`` is a string (``'vuyxc'``, ``'v,u,y,x'``)
+    or a sequence of names; None means already in order."""
+    if axes is None:
+        return None
+    if isinstance(axes, bytes):
+        axes = axes.decode()
+    if isinstance(axes, str):
+        names = [a.strip() for a in axes.split(",")] if "," in axes else list(axes.strip())
+    else:
+        names = [a.decode() if isinstance(a, bytes) else str(a) for a in axes]
+    try:
+        names = [_AXIS_ALIASES[n.lower()] for n in names]
+    except KeyError as exc:
+        raise LightFieldFormatError(
+            f"{path}: unknown axis name {exc.args[0]!r} in axes={axes!r}; use the letters v, u, y, x, c"
+        ) from None
+    if len(names) != ndim:
+        raise LightFieldFormatError(f"{path}: axes={axes!r} names {len(names)} axes but the data has {ndim}")
+    want = ["v", "u", "y", "x", "c"][:ndim]
+    if sorted(names) != sorted(want):
+        raise LightFieldFormatError(f"{path}: axes={axes!r} must name each of {''.join(want)} once")
+    return tuple(names.index(a) for a in want)
+
+
+def _finish(raw, path, meta, axes, value_range):
+    raw = np.asarray(raw)
+    perm = parse_axes(axes, raw.ndim, path)
+    if perm is not None:
+        raw = np.transpose(raw, perm)
+        meta["axes_in_file"] = axes if isinstance(axes, str) else list(axes)
+    meta["file_dtype"] = str(raw.dtype)
+    raw = validate_lightfield(raw, path)
+    return to_float01(np.ascontiguousarray(raw), path, value_range=value_range), meta
+
+
+def _shape_error(shape, path, what="the array"):
+    """Raise on a shape that cannot be a light field (without loading data)."""
+    if len(shape) in (2, 3):
+        raise LightFieldFormatError(
+            f"{path}: {what} is {len(shape)}D, shape {tuple(shape)}; a light field is 4D (V, U, Y, X) or "
+            f"5D (V, U, Y, X, C). A single image or a stack of views is not enough: arrange the views "
+            f"on a (V, U) grid"
+        )
+    if len(shape) not in (4, 5):
+        raise LightFieldFormatError(
+            f"{path}: {what} has shape {tuple(shape)}; a light field is 4D (V, U, Y, X) or 5D (V, U, Y, X, C)"
+        )
+
+
+# ------------------------------------------------------------------ .npy / .npz
+
+
+def read_npy(path, *, axes=None, value_range=None, max_bytes=None):
+    path = Path(path)
+    try:
+        mm = np.load(path, mmap_mode="r", allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001
+        raise LightFieldReadError(f"{path}: not a readable .npy file ({type(exc).__name__}: {exc})") from None
+    _shape_error(mm.shape, path)
+    check_memory(mm.shape, mm.dtype.itemsize, path, max_bytes=max_bytes)
+    try:
+        raw = np.array(mm)
+    except Exception as exc:  # noqa: BLE001
+        raise LightFieldReadError(f"{path}: cannot read the data, the file may be truncated ({exc})") from None
+    finally:
+        del mm
+    return _finish(raw, path, {"layout": "npy"}, axes, value_range)
+
+
+def _npz_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    out = {}
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            with zf.open(info) as fh:
+                version = np.lib.format.read_magic(fh)
+                if version == (1, 0):
+                    shape, _fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+                else:
+                    shape, _fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+            out[info.filename[:-4]] = (tuple(shape), np.dtype(dtype))
+    return out
+
+
+def npz_lightfield_key(path, headers=None) -> str | None:
+    """The key of the light field in an .npz: ``lf`` (or ``LF``), or the only
+    4D/5D array. None when there is none."""
+    headers = _npz_headers(Path(path)) if headers is None else headers
+    for k in ("lf", "LF"):
+        if k in headers:
+            return k
+    cands = [k for k, (s, _d) in headers.items() if len(s) in (4, 5)]
+    if len(cands) == 1:
+        return cands[0]
+    arrays = [k for k in headers if k != METADATA_KEY and k != "control_points"]
+    if len(arrays) == 1:
+        return arrays[0]
+    return None
+
+
+def read_npz(path, *, key=None, axes=None, value_range=None, max_bytes=None):
+    path = Path(path)
+    try:
+        headers = _npz_headers(path)
+    except Exception as exc:  # noqa: BLE001
+        raise LightFieldReadError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+    if key is None:
+        key = npz_lightfield_key(path, headers)
+        if key is None:
+            raise LightFieldFormatError(
+                f"{path}: no array named 'lf' and not exactly one 4D/5D array (found {sorted(headers)}); pass key="
+            )
+    elif key not in headers:
+        raise LightFieldFormatError(f"{path}: no array {key!r} (found {sorted(headers)})")
+    shape, dtype = headers[key]
+    _shape_error(shape, path, f"array {key!r}")
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
+    meta: dict = {"layout": "npz", "key": key}
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            raw = z[key]
+            if METADATA_KEY in z.files:
+                meta.update(_load_json_meta(z[METADATA_KEY]))
+            if "control_points" in z.files and key != "control_points":
+                meta["control_points"] = np.asarray(z["control_points"], float).tolist()
+    except Exception as exc:  # noqa: BLE001
+        raise LightFieldReadError(f"{path}: cannot read array {key!r} ({type(exc).__name__}: {exc})") from None
+    meta["layout"] = "npz"
+    return _finish(raw, path, meta, axes, value_range)
+
+
+def _load_json_meta(value) -> dict:
+    try:
+        s = value.item() if isinstance(value, np.ndarray) else value
+        if isinstance(s, bytes):
+            s = s.decode()
+        doc = json.loads(s)
+        if isinstance(doc, dict):
+            doc = {k: v for k, v in doc.items() if k not in ("source", "layout")}
+            return {"saved_metadata": doc} if doc else {}
+    except Exception:  # noqa: BLE001 - metadata is best effort
+        pass
+    return {}
+
+
+# ------------------------------------------------------------------ TIFF
+
+
+def tiff_shape(path) -> tuple[tuple[int, ...], np.dtype, dict]:
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        s = tif.series[0]
+        meta = {}
+        if tif.shaped_metadata:
+            meta = dict(tif.shaped_metadata[0])
+        return tuple(s.shape), np.dtype(s.dtype), meta
+
+
+def read_tiff(path, *, axes=None, value_range=None, max_bytes=None):
+    import tifffile
+
+    path = Path(path)
+    try:
+        shape, dtype, tmeta = tiff_shape(path)
+    except Exception as exc:  # noqa: BLE001
+        raise LightFieldReadError(f"{path}: not a readable TIFF file ({type(exc).__name__}: {exc})") from None
+    meta: dict = {"layout": "tiff"}
+    if axes is None and "lfdeblur_axes" in tmeta:
+        axes = tmeta["lfdeblur_axes"]
+    if len(shape) == 6 and shape[-1] == 1:
+        shape = shape[:-1]
+    _shape_error(shape, path, "the TIFF image series")
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
+    try:
+        raw = tifffile.imread(path)
+    except Exception as exc:  # noqa: BLE001
+        raise LightFieldReadError(f"{path}: cannot decode the TIFF data ({type(exc).__name__}: {exc})") from None
+    raw = raw.reshape(shape)
+    if METADATA_KEY in tmeta:
+        meta.update(_load_json_meta(tmeta[METADATA_KEY]))
+    return _finish(raw, path, meta, axes, value_range)
+
+
+# ------------------------------------------------------------------ HDF5
+
+
+def _attrs_to_dict(attrs, limit=64) -> dict:
+    out = {}
+    for k, v in attrs.items():
+        if k in (METADATA_KEY,):
+            continue
+        if isinstance(v, bytes):
+            v = v.decode(errors="replace")
+        elif isinstance(v, np.ndarray):
+            if v.size > limit:
+                continue
+            v = [x.decode(errors="replace") if isinstance(x, bytes) else x for x in v.tolist()]
+        elif isinstance(v, np.generic):
+            v = v.item()
+        if isinstance(v, (str, int, float, bool, list)):
+            out[k] = v
+    return out
+
+
+def h5_lightfield_name(f) -> str | None:
+    """Name of the light-field dataset in an open h5py File: ``LF`` / ``lf``,
+    or the only 4D/5D dataset anywhere in the file."""
+    import h5py
+
+    for k in ("LF", "lf"):
+        if k in f and isinstance(f[k], h5py.Dataset):
+            return k
+    found = []
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset) and obj.ndim in (4, 5):
+            found.append(name)
+
+    f.visititems(visit)
+    return found[0] if len(found) == 1 else None
+
+
+def read_h5(path, *, dataset=None, axes=None, value_range=None, max_bytes=None):
+    import h5py
+
+    path = Path(path)
+    try:
+        f = h5py.File(path, "r")
+    except Exception as exc:  # noqa: BLE001
+        raise LightFieldReadError(f"{path}: not a readable HDF5 file ({type(exc).__name__}: {exc})") from None
+    with f:
+        name = dataset or h5_lightfield_name(f)
+        if name is None or name not in f or not isinstance(f[name], h5py.Dataset):
+            datasets = []
+            f.visititems(lambda n, o: datasets.append(f"{n} {o.shape}") if isinstance(o, h5py.Dataset) else None)
+            what = f"no dataset {dataset!r}" if dataset else "no dataset 'LF' and not exactly one 4D/5D dataset"
+            raise LightFieldFormatError(f"{path}: {what} (found {datasets[:10]}); pass dataset=")
+        ds = f[name]
+        _shape_error(ds.shape, path, f"dataset {name!r}")
+        check_memory(ds.shape, ds.dtype.itemsize, path, max_bytes=max_bytes)
+        if axes is None:
+            for attr in ("axes", "axis_order", "dims", "dimension_order", "lfdeblur_axes"):
+                if attr in ds.attrs:
+                    axes = ds.attrs[attr]
+                    if isinstance(axes, np.ndarray):
+                        axes = [a.decode() if isinstance(a, bytes) else str(a) for a in axes.tolist()]
+                    break
+        try:
+            raw = ds[()]
+        except Exception as exc:  # noqa: BLE001
+            raise LightFieldReadError(f"{path}: cannot read dataset {name!r} ({type(exc).__name__}: {exc})") from None
+        meta: dict = {"layout": "h5", "dataset": name}
+        cam = {**_attrs_to_dict(f.attrs), **_attrs_to_dict(ds.attrs)}
+        cam = {k: v for k, v in cam.items() if k not in ("axes", "axis_order", "dims", "dimension_order",
+                                                          "lfdeblur_axes")}
+        if cam:
+            meta["camera"] = cam
+        for holder in (ds.attrs, f.attrs):
+            if METADATA_KEY in holder:
+                meta.update(_load_json_meta(holder[METADATA_KEY]))
+                break
+    return _finish(raw, path, meta, axes, value_range)

@@ -1,0 +1,141 @@
+"""Single-image layouts: the ESLF lenslet mosaic and the view-grid mosaic.
+
+ESLF (as in the Stanford Lytro archive's ``*.eslf.png``)
+    Each lenslet is an ``A x A`` block: mosaic pixel ``(y*A + v, x*A + u)``
+    is light-field sample ``(v, u, y, x)``.
+View-grid mosaic
+    Each view is a ``Y x X`` block: mosaic pixel ``(v*Y + y, u*X + x)`` is
+    light-field sample ``(v, u, y, x)``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ._common import LightFieldFormatError, check_memory, to_float01
+from ._images import image_props, read_image
+
+DEFAULT_ANGULAR_SIZE = 14
+
+
+def detect_angular_size(height: int, width: int, path="mosaic") -> int:
+    """The ESLF lenslet size ``A``: 14 when it divides both sides, else the one
+    size in 2..32 that does; raises when ambiguous."""
+    if height % DEFAULT_ANGULAR_SIZE == 0 and width % DEFAULT_ANGULAR_SIZE == 0:
+        return DEFAULT_ANGULAR_SIZE
+    cands = [a for a in range(2, 33) if height % a == 0 and width % a == 0 and min(height, width) // a >= 4]
+    # a size that divides both sides has all its divisors dividing them too; keep the maximal ones
+    maximal = [a for a in cands if not any(b != a and b % a == 0 for b in cands)]
+    if len(maximal) == 1:
+        return maximal[0]
+    raise LightFieldFormatError(
+        f"{path}: cannot tell the lenslet size of a {height}x{width} ESLF image "
+        f"(candidates {maximal or 'none'}); pass angular_size=A"
+    )
+
+
+def _drop_opaque_alpha(img: np.ndarray) -> np.ndarray:
+    if img.ndim == 3 and img.shape[2] == 4:
+        top = np.iinfo(img.dtype).max if np.issubdtype(img.dtype, np.integer) else 1.0
+        if np.all(img[..., 3] == top):
+            return img[..., :3]
+    return img
+
+
+def _crop_angular(lf: np.ndarray, n, path) -> np.ndarray:
+    if n is None:
+        return lf
+    n = int(n)
+    V, U = lf.shape[:2]
+    if not 1 <= n <= min(V, U):
+        raise ValueError(f"{path}: angular_crop={n} must be between 1 and {min(V, U)}")
+    v0, u0 = (V - n) // 2, (U - n) // 2
+    return np.ascontiguousarray(lf[v0 : v0 + n, u0 : u0 + n])
+
+
+def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, max_bytes=None):
+    """Read an ESLF lenslet mosaic.
+
+    Parameters
+    ----------
+    angular_size : int, optional
+        Lenslet size ``A`` in pixels (views per side). Default 14, or the only
+        size that divides the image.
+    angular_crop : int, optional
+        Keep only the central ``n x n`` views (the outer ones of a Lytro ESLF
+        are dark).
+
+    Returns
+    -------
+    lf : ndarray, (A, A, Y, X[, C]) float32 in [0, 1]
+    metadata : dict
+    """
+    path = Path(path)
+    shape, dtype = image_props(path)
+    H, W = shape[:2]
+    if angular_size is None:
+        A = detect_angular_size(H, W, path)
+    else:
+        A = int(angular_size)
+        if A < 1:
+            raise ValueError(f"angular_size must be positive, not {angular_size}")
+    if H < A or W < A:
+        raise LightFieldFormatError(f"{path}: a {H}x{W} image is smaller than one {A}x{A} lenslet")
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
+    img = _drop_opaque_alpha(read_image(path))
+    Y, X = img.shape[0] // A, img.shape[1] // A
+    img = img[: Y * A, : X * A]
+    lf = img.reshape((Y, A, X, A) + img.shape[2:])
+    lf = np.moveaxis(lf, (1, 3), (0, 1))  # (A, A, Y, X[, C])
+    lf = _crop_angular(lf, angular_crop, path)
+    meta = {"layout": "eslf", "angular_size": A, "file_dtype": str(img.dtype), "mosaic_shape": [H, W]}
+    if angular_crop is not None:
+        meta["angular_crop"] = int(angular_crop)
+    return to_float01(np.ascontiguousarray(lf), path, value_range=value_range), meta
+
+
+def read_mosaic(path, *, grid=None, value_range=None, max_bytes=None):
+    """Read a view-grid mosaic: views tiled as ``grid = (V, U)`` blocks.
+
+    Returns
+    -------
+    lf : ndarray, (V, U, Y, X[, C]) float32 in [0, 1]
+    metadata : dict
+    """
+    path = Path(path)
+    if grid is None:
+        raise LightFieldFormatError(
+            f"{path}: a view-grid mosaic needs its grid size; pass grid=(V, U) (views down, views across)"
+        )
+    V, U = (int(g) for g in grid)
+    if V < 1 or U < 1:
+        raise ValueError(f"grid must be two positive integers, not {grid}")
+    shape, dtype = image_props(path)
+    H, W = shape[:2]
+    if H % V or W % U:
+        raise LightFieldFormatError(
+            f"{path}: a {H}x{W} image does not split into a {V}x{U} grid of equal views"
+        )
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
+    img = _drop_opaque_alpha(read_image(path))
+    Y, X = H // V, W // U
+    lf = img.reshape((V, Y, U, X) + img.shape[2:]).swapaxes(1, 2)
+    meta = {"layout": "mosaic", "grid": [V, U], "file_dtype": str(img.dtype), "mosaic_shape": [H, W]}
+    return to_float01(np.ascontiguousarray(lf), path, value_range=value_range), meta
+
+
+def lightfield_to_mosaic(lf: np.ndarray, kind: str = "grid") -> np.ndarray:
+    """Tile a ``(V, U, Y, X[, C])`` light field into one image.
+
+    ``kind='grid'`` gives the view-grid mosaic ``(V*Y, U*X[, C])``;
+    ``kind='eslf'`` the lenslet mosaic ``(Y*V, X*U[, C])`` (needs V == U).
+    """
+    V, U, Y, X = lf.shape[:4]
+    rest = lf.shape[4:]
+    if kind == "grid":
+        return np.ascontiguousarray(lf.swapaxes(1, 2)).reshape((V * Y, U * X) + rest)
+    if kind == "eslf":
+        return np.ascontiguousarray(np.moveaxis(lf, (0, 1), (1, 3))).reshape((Y * V, X * U) + rest)
+    raise ValueError(f"kind must be 'grid' or 'eslf', not {kind!r}")

@@ -1,0 +1,274 @@
+"""Folder-of-views layouts: one image file per view.
+
+Three naming schemes are recognised:
+
+``rc``
+    ``..._RR_CC.png``: the last two numbers of the name are the view row and
+    column, 1-based (0-based when some index is 0). Other numbers are ignored,
+    so Light Field Toolbox / Lytro names such as ``IMG_0001_001_01_01.png``
+    work. This is also what :func:`write_lightfield` writes.
+``hci``
+    HCI 4D benchmark ``input_CamNNN.png``: row-major, the grid side is the
+    square root of the number of views. ``parameters.cfg`` goes to metadata.
+``stanford``
+    Stanford gantry ``out_RR_CC_<y>_<x>_.png``: 0-based; the trailing camera
+    positions are ignored for indexing and kept in metadata.
+"""
+
+from __future__ import annotations
+
+import configparser
+import math
+import os
+import re
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from ._common import LightFieldFormatError, check_memory, to_float01
+from ._images import IMAGE_EXTENSIONS, image_props, read_image
+
+_EXT = r"\.(?:png|jpe?g|tiff?|bmp)$"
+_HCI = re.compile(r"^input_Cam(\d+)" + _EXT, re.IGNORECASE)
+_STANFORD = re.compile(r"^out_(\d+)_(\d+)(?:_(-?[\d.]+)_(-?[\d.]+))?.*" + _EXT, re.IGNORECASE)
+_RC = re.compile(r"^(?:.*\D)?(\d+)[_-](\d+)" + _EXT, re.IGNORECASE)
+
+SCHEMES = ("rc", "hci", "stanford")
+
+
+def _image_files(folder: Path) -> list[str]:
+    return sorted(
+        n for n in os.listdir(folder) if n.lower().endswith(IMAGE_EXTENSIONS) and not n.startswith(".")
+    )
+
+
+def probe_scheme(folder) -> str | None:
+    """The naming scheme of a folder of views, or None if it holds no light field.
+
+    Cheap: looks at file names only.
+    """
+    folder = Path(folder)
+    try:
+        names = _image_files(folder)
+    except OSError:
+        return None
+    if len(names) < 2:
+        return None
+    counts = {
+        "hci": sum(bool(_HCI.match(n)) for n in names),
+        "stanford": sum(bool(_STANFORD.match(n)) for n in names),
+        "rc": sum(bool(_RC.match(n)) for n in names),
+    }
+    for scheme in ("hci", "stanford", "rc"):  # most specific first
+        if counts[scheme] >= 2 and counts[scheme] >= len(names) / 2:
+            return scheme
+    return None
+
+
+def _parse_cfg(path: Path) -> dict:
+    cp = configparser.ConfigParser()
+    try:
+        cp.read(path)
+    except configparser.Error:
+        return {}
+    out: dict = {}
+    for sec in cp.sections():
+        d = {}
+        for k, v in cp.items(sec):
+            try:
+                num = float(v)
+                d[k] = int(num) if num.is_integer() and "." not in v and "e" not in v.lower() else num
+            except ValueError:
+                d[k] = v
+        out[sec] = d
+    return out
+
+
+def _map_views(folder: Path, scheme: str, pattern=None, index_base=None, grid=None):
+    """Map (row, col), 0-based, to file names. Returns (mapping, (V, U), info)."""
+    names = _image_files(folder)
+    info: dict = {}
+    views: dict[tuple[int, int], str] = {}
+    dup: list[str] = []
+
+    def put(key, name):
+        if key in views:
+            dup.append(f"{views[key]} and {name}")
+        else:
+            views[key] = name
+
+    if pattern is not None:
+        rx = re.compile(pattern) if isinstance(pattern, str) else pattern
+        base = 1 if index_base is None else int(index_base)
+        for n in names:
+            m = rx.search(n)
+            if m:
+                gd = m.groupdict()
+                r, c = (gd["row"], gd["col"]) if "row" in gd and "col" in gd else m.groups()[:2]
+                put((int(r) - base, int(c) - base), n)
+    elif scheme == "hci":
+        idx = {}
+        for n in names:
+            m = _HCI.match(n)
+            if m:
+                k = int(m.group(1))
+                if k in idx:
+                    dup.append(f"{idx[k]} and {n}")
+                idx[k] = n
+        total = max(idx) + 1
+        if grid is not None:
+            V, U = (int(g) for g in grid)
+        else:
+            side = math.isqrt(total)
+            if side * side != total:
+                raise LightFieldFormatError(
+                    f"{folder}: {len(idx)} HCI views input_CamNNN with indices up to {total - 1} do not form a "
+                    f"square grid; pass grid=(V, U) if the grid is not square"
+                )
+            V = U = side
+        for k, n in idx.items():
+            if k >= V * U:
+                raise LightFieldFormatError(f"{folder}: {n} is outside the {V}x{U} grid")
+            put((k // U, k % U), n)
+        cfg = folder / "parameters.cfg"
+        if cfg.is_file():
+            info["camera"] = _parse_cfg(cfg)
+    elif scheme == "stanford":
+        base = 0 if index_base is None else int(index_base)
+        positions = {}
+        for n in names:
+            m = _STANFORD.match(n)
+            if m:
+                key = (int(m.group(1)) - base, int(m.group(2)) - base)
+                put(key, n)
+                if m.group(3) is not None:
+                    try:
+                        positions[key] = (float(m.group(3)), float(m.group(4)))
+                    except ValueError:
+                        pass
+        if positions:
+            info["camera_positions"] = positions
+    else:  # rc
+        parsed = []
+        for n in names:
+            m = _RC.match(n)
+            if m:
+                parsed.append((int(m.group(1)), int(m.group(2)), n))
+        if index_base is None:
+            base = 0 if any(r == 0 or c == 0 for r, c, _ in parsed) else 1
+        else:
+            base = int(index_base)
+        info["index_base"] = base
+        for r, c, n in parsed:
+            put((r - base, c - base), n)
+    if dup:
+        raise LightFieldFormatError(
+            f"{folder}: several files give the same view: {'; '.join(dup[:3])}; keep one light field "
+            f"per folder or pass pattern= to select the files"
+        )
+    if not views:
+        raise LightFieldFormatError(f"{folder}: no view file names match the {scheme!r} naming scheme")
+    if min(min(k) for k in views) < 0:
+        raise LightFieldFormatError(f"{folder}: view indices below the index base; pass index_base=0")
+    if grid is not None and scheme != "hci":
+        V, U = (int(g) for g in grid)
+    elif scheme != "hci" or pattern is not None:
+        V = max(k[0] for k in views) + 1
+        U = max(k[1] for k in views) + 1
+    outside = [n for k, n in views.items() if k[0] >= V or k[1] >= U]
+    if outside:
+        raise LightFieldFormatError(f"{folder}: {outside[0]} lies outside the {V}x{U} grid")
+    missing = [(r, c) for r in range(V) for c in range(U) if (r, c) not in views]
+    if missing:
+        if scheme == "hci" and pattern is None:
+            shown = ", ".join(f"input_Cam{r * U + c:03d}" for r, c in missing[:5])
+        else:
+            b = info.get("index_base", 0 if scheme == "stanford" else 1)
+            shown = ", ".join(f"({r + b}, {c + b})" for r, c in missing[:5])
+        raise LightFieldFormatError(
+            f"{folder}: {len(missing)} view(s) missing from the {V}x{U} grid: {shown}"
+            f"{', ...' if len(missing) > 5 else ''}"
+        )
+    return views, (V, U), info
+
+
+def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None, value_range=None,
+               max_bytes=None, workers=None):
+    """Read a folder of view images.
+
+    Parameters
+    ----------
+    folder : path
+        The folder.
+    scheme : {'rc', 'hci', 'stanford'}, optional
+        Naming scheme; detected from the file names by default.
+    pattern : str, optional
+        Regular expression with groups ``row`` and ``col`` (or two plain
+        groups) matched against each file name; overrides the scheme.
+    index_base : {0, 1}, optional
+        Base of the indices in the names.
+    grid : (int, int), optional
+        ``(V, U)`` when it cannot be inferred (non-square HCI grids).
+    value_range, max_bytes :
+        See :func:`napari_lfdeblur.io.read_lightfield`.
+
+    Returns
+    -------
+    lf : ndarray, (V, U, Y, X[, C]) float32 in [0, 1]
+    metadata : dict
+    """
+    folder = Path(folder)
+    if scheme is None:
+        scheme = probe_scheme(folder) or ("rc" if pattern is not None else None)
+        if scheme is None:
+            raise LightFieldFormatError(
+                f"{folder}: no light-field view files found; expected names like view_RR_CC.png, "
+                f"input_CamNNN.png or out_RR_CC_*.png (or pass pattern=)"
+            )
+    elif scheme not in SCHEMES:
+        raise ValueError(f"unknown naming scheme {scheme!r}; choose one of {SCHEMES}")
+    views, (V, U), info = _map_views(folder, scheme, pattern, index_base, grid)
+    first = folder / views[(0, 0)]
+    shape0, dtype0 = image_props(first)
+    check_memory((V, U) + tuple(shape0), dtype0.itemsize, folder, max_bytes=max_bytes)
+
+    keys = [(r, c) for r in range(V) for c in range(U)]
+    paths = [folder / views[k] for k in keys]
+    n_workers = workers or min(8, os.cpu_count() or 1, len(paths))
+    with ThreadPoolExecutor(max_workers=max(1, n_workers)) as pool:
+        it = pool.map(read_image, paths)
+        first_img = next(it)
+        raw = np.empty((V, U) + first_img.shape, first_img.dtype)
+        raw[0, 0] = first_img
+        for (r, c), p, img in zip(keys[1:], paths[1:], it):
+            if img.shape != first_img.shape:
+                raise LightFieldFormatError(
+                    f"{p}: view ({r}, {c}) has shape {img.shape} but {paths[0].name} has {first_img.shape}; "
+                    f"all views must have the same size"
+                )
+            if img.dtype != first_img.dtype:
+                raise LightFieldFormatError(
+                    f"{p}: view has dtype {img.dtype} but {paths[0].name} has {first_img.dtype}; "
+                    f"all views must have the same bit depth"
+                )
+            raw[r, c] = img
+    lf = to_float01(raw, folder, value_range=value_range)
+    meta = {
+        "layout": {"rc": "views", "hci": "hci", "stanford": "stanford"}[scheme],
+        "naming": scheme,
+        "n_views": [V, U],
+        "file_dtype": str(first_img.dtype),
+        "files": [views[k] for k in ((0, 0), (V - 1, U - 1))],
+    }
+    if "index_base" in info:
+        meta["index_base"] = info["index_base"]
+    if "camera" in info:
+        meta["camera"] = info["camera"]
+    if "camera_positions" in info:
+        pos = info["camera_positions"]
+        meta["camera"] = {
+            "positions": [[list(pos.get((r, c), (math.nan, math.nan))) for c in range(U)] for r in range(V)],
+            "positions_note": "the two numbers after out_RR_CC_ in each file name, per view (v, u)",
+        }
+    return lf, meta

@@ -1,0 +1,232 @@
+"""Writing light fields: ``.npz``, ``.npy``, TIFF, HDF5, a folder of
+``view_RR_CC.png`` views, and single-image mosaics. Every write goes to a
+temporary name first and is renamed into place, so a failure leaves nothing
+half-written, and nothing is overwritten unless ``overwrite=True``.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ._arrays import METADATA_KEY
+from ._common import (
+    LightFieldFormatError,
+    atomic_dir,
+    atomic_file,
+    check_writable,
+    to_float01,
+    validate_lightfield,
+)
+from ._mosaic import lightfield_to_mosaic
+from ._png import write_png
+
+WRITE_LAYOUTS = ("npz", "npy", "tiff", "h5", "views", "mosaic", "eslf")
+_SUFFIX_LAYOUT = {".npz": "npz", ".npy": "npy", ".tif": "tiff", ".tiff": "tiff", ".h5": "h5", ".hdf5": "h5"}
+_VIEW_NAME = re.compile(r"^view_\d+_\d+\.(png|tif)$")
+SIDECAR_NAMES = ("lightfield.json", "path.json")
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist() if obj.size <= 4096 else f"<array {obj.shape} {obj.dtype}>"
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    if obj is None or isinstance(obj, (str, int, float, bool)):
+        return obj
+    return repr(obj)
+
+
+def _quantize(lf: np.ndarray, bit_depth: int) -> np.ndarray:
+    dtype = {8: np.uint8, 16: np.uint16}[bit_depth]
+    top = float(np.iinfo(dtype).max)
+    return np.rint(np.clip(lf, 0.0, 1.0) * top).astype(dtype)
+
+
+def sidecar_path_json(path: Path, layout: str) -> Path:
+    """Where the camera path of a light field written to ``path`` goes."""
+    if layout == "views":
+        return path / "path.json"
+    return path.with_name(path.name[: -len(path.suffix)] + ".path.json" if path.suffix else path.name + ".path.json")
+
+
+def write_lightfield(
+    path,
+    lf,
+    *,
+    overwrite: bool = False,
+    bit_depth: int | None = None,
+    layout: str | None = None,
+    metadata: dict | None = None,
+    control_points=None,
+    compress: bool = True,
+) -> Path:
+    """Write a light field to a file or a folder of views.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination. The suffix picks the format: ``.npz``, ``.npy``,
+        ``.tif``/``.tiff``, ``.h5``/``.hdf5``; no suffix (or an existing
+        folder) writes a folder of ``view_RR_CC.png`` views, 1-based, which
+        :func:`read_lightfield` reads back.
+    lf : array_like, (V, U, Y, X) or (V, U, Y, X, C)
+        The light field. Float data should be in [0, 1] (integer formats clip
+        to it); integer data is scaled by its dtype's maximum.
+    overwrite : bool
+        Replace an existing file. Default False: raise FileExistsError. A
+        folder is only replaced if it holds nothing but views written by us.
+    bit_depth : {None, 8, 16, 32}
+        Sample format. ``None``: float32 for array formats (lossless), 8-bit
+        for PNG views and mosaics. 8 and 16 store unsigned integers; 32 float32.
+    layout : {'npz', 'npy', 'tiff', 'h5', 'views', 'mosaic', 'eslf'}, optional
+        Override the format chosen from the suffix. ``'mosaic'`` tiles the
+        views into one image (``.png`` or ``.tif``); ``'eslf'`` writes the
+        lenslet mosaic (pixel ``(y*V + v, x*U + u)``).
+    metadata : dict, optional
+        JSON-serialisable metadata stored with the data (not in ``.npy``).
+    control_points : array_like (n, 3), optional
+        A camera path; written next to the output as JSON by
+        :func:`napari_lfdeblur.path.save_path_json` (``<name>.path.json``, or
+        ``path.json`` inside a views folder), and embedded in ``.npz``/``.h5``.
+    compress : bool
+        Compress ``.npz``, TIFF and HDF5 data (lossless).
+
+    Returns
+    -------
+    Path
+        The written file or folder.
+
+    Raises
+    ------
+    FileExistsError
+        If the destination exists and ``overwrite`` is False.
+    LightFieldFormatError
+        If ``lf`` is not a light field or contains NaN/Inf.
+    """
+    path = Path(path)
+    if layout is None:
+        if path.suffix.lower() in _SUFFIX_LAYOUT:
+            layout = _SUFFIX_LAYOUT[path.suffix.lower()]
+        elif path.suffix == "" or path.is_dir():
+            layout = "views"
+        else:
+            raise LightFieldFormatError(
+                f"{path}: cannot tell the format from the suffix {path.suffix!r}; use .npz, .npy, .tif, .h5, "
+                f"a folder name without suffix, or pass layout= (one of {WRITE_LAYOUTS})"
+            )
+    if layout not in WRITE_LAYOUTS:
+        raise ValueError(f"unknown layout {layout!r}; choose one of {WRITE_LAYOUTS}")
+    if bit_depth not in (None, 8, 16, 32):
+        raise ValueError(f"bit_depth must be 8, 16 or 32 (float), not {bit_depth!r}")
+
+    arr = validate_lightfield(lf, "light field to write")
+    if np.issubdtype(arr.dtype, np.floating):
+        if not np.isfinite(arr).all():
+            raise LightFieldFormatError(f"cannot write {path}: the light field contains NaN or Inf")
+        arr = arr.astype(np.float32, copy=False)
+    else:
+        arr = to_float01(arr, "light field to write")
+
+    cp = None
+    if control_points is not None:
+        from ..path import validate_control_points
+
+        cp = validate_control_points(control_points)
+    meta = _jsonable({"axes": "vuyxc"[: arr.ndim], "shape": list(arr.shape), **(metadata or {})})
+    if cp is not None:
+        meta["control_points"] = cp.tolist()
+    sidecar = sidecar_path_json(path, layout) if cp is not None else None
+    if sidecar is not None and layout != "views":
+        check_writable(sidecar, overwrite)
+
+    if layout in ("views", "mosaic", "eslf"):
+        depth = 8 if bit_depth is None else bit_depth
+        if depth == 32 and (layout == "views" or path.suffix.lower() == ".png"):
+            raise ValueError("PNG stores 8 or 16 bits; use bit_depth=8 or 16, or a .tif/.npz for float32")
+    else:
+        depth = 32 if bit_depth is None else bit_depth
+    data = arr if depth == 32 else _quantize(arr, depth)
+    meta["bit_depth"] = depth
+
+    if layout == "npz":
+        with atomic_file(path, overwrite=overwrite) as tmp:
+            extra = {METADATA_KEY: np.array(json.dumps(meta))}
+            if cp is not None:
+                extra["control_points"] = cp
+            with open(tmp, "wb") as fh:
+                (np.savez_compressed if compress else np.savez)(fh, lf=data, **extra)
+    elif layout == "npy":
+        with atomic_file(path, overwrite=overwrite) as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, data, allow_pickle=False)
+    elif layout == "tiff":
+        import tifffile
+
+        with atomic_file(path, overwrite=overwrite) as tmp:
+            tifffile.imwrite(
+                tmp,
+                data,
+                photometric="rgb" if data.ndim == 5 else "minisblack",
+                compression="zlib" if compress else None,
+                metadata={"lfdeblur_axes": "vuyxc"[: data.ndim], METADATA_KEY: json.dumps(meta)},
+            )
+    elif layout == "h5":
+        import h5py
+
+        with atomic_file(path, overwrite=overwrite) as tmp:
+            with h5py.File(tmp, "w") as f:
+                ds = f.create_dataset(
+                    "LF",
+                    data=data,
+                    chunks=(1, 1) + data.shape[2:],
+                    compression="gzip" if compress else None,
+                )
+                ds.attrs["axes"] = "vuyxc"[: data.ndim]
+                ds.attrs[METADATA_KEY] = json.dumps(meta)
+                if cp is not None:
+                    ds.attrs["control_points"] = cp
+    elif layout in ("mosaic", "eslf"):
+        if layout == "eslf" and arr.shape[0] != arr.shape[1]:
+            raise LightFieldFormatError(f"cannot write {path} as ESLF: it needs V == U, got {arr.shape[:2]}")
+        img = lightfield_to_mosaic(data, "grid" if layout == "mosaic" else "eslf")
+        with atomic_file(path, overwrite=overwrite) as tmp:
+            if path.suffix.lower() in (".tif", ".tiff"):
+                import tifffile
+
+                tifffile.imwrite(tmp, img, photometric="rgb" if img.ndim == 3 else "minisblack")
+            elif path.suffix.lower() == ".png":
+                write_png(tmp, img)
+            else:
+                raise LightFieldFormatError(f"{path}: a mosaic is written as .png or .tif")
+    else:  # views
+        V, U = data.shape[:2]
+        width = max(2, len(str(max(V, U))))
+
+        def replaceable(name):
+            return bool(_VIEW_NAME.match(name)) or name in SIDECAR_NAMES
+
+        with atomic_dir(path, overwrite=overwrite, replaceable=replaceable) as tmp:
+            for v in range(V):
+                for u in range(U):
+                    write_png(tmp / f"view_{v + 1:0{width}d}_{u + 1:0{width}d}.png", data[v, u])
+            (tmp / "lightfield.json").write_text(json.dumps(meta, indent=2))
+            if cp is not None:
+                from ..path import save_path_json
+
+                save_path_json(tmp / "path.json", cp)
+        return path
+    if sidecar is not None:
+        from ..path import save_path_json
+
+        save_path_json(sidecar, cp, overwrite=overwrite)
+    return path
