@@ -21,18 +21,17 @@ DEFAULT_ANGULAR_SIZE = 14
 
 
 def detect_angular_size(height: int, width: int, path="mosaic") -> int:
-    """The ESLF lenslet size ``A``: 14 when it divides both sides, else the one
-    size in 2..32 that does; raises when ambiguous."""
+    """The ESLF lenslet size ``A``: 14 when it divides both sides, else the only
+    size in 2..32 that does; raises when there are several (any multiple of
+    the true size that divides the image would fit the layout as well)."""
     if height % DEFAULT_ANGULAR_SIZE == 0 and width % DEFAULT_ANGULAR_SIZE == 0:
         return DEFAULT_ANGULAR_SIZE
     cands = [a for a in range(2, 33) if height % a == 0 and width % a == 0 and min(height, width) // a >= 4]
-    # a size that divides both sides has all its divisors dividing them too; keep the maximal ones
-    maximal = [a for a in cands if not any(b != a and b % a == 0 for b in cands)]
-    if len(maximal) == 1:
-        return maximal[0]
+    if len(cands) == 1:
+        return cands[0]
     raise LightFieldFormatError(
         f"{path}: cannot tell the lenslet size of a {height}x{width} ESLF image "
-        f"(candidates {maximal or 'none'}); pass angular_size=A"
+        f"(candidates {cands or 'none'}); pass angular_size=A"
     )
 
 
