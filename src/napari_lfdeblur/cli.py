@@ -114,9 +114,48 @@ def _run_demo(args):
         print(f"  {name}")
 
 
+# ------------------------------------------------------------------ info
+
+
+def _add_info(sub):
+    p = sub.add_parser("info", help="describe a light field: layout, shape, dtype, value range, metadata")
+    p.add_argument("input", help="light field file or folder")
+    p.add_argument("--layout", default=None, help="override the detected layout (views, hci, stanford, eslf, "
+                   "mosaic, mat, h5, npy, npz, tiff)")
+    p.add_argument("--grid", default=None, help="V,U view grid (mosaic layout)")
+    p.add_argument("--angular-size", type=int, default=None, help="lenslet size A (eslf layout)")
+
+
+def _run_info(args):
+    import json
+
+    from .io import read_lightfield_with_metadata
+
+    if not Path(args.input).exists():
+        raise CLIError(f"input {args.input} does not exist")
+    options = {}
+    if args.grid:
+        try:
+            options["grid"] = tuple(int(g) for g in args.grid.replace("x", ",").split(","))
+        except ValueError:
+            raise CLIError(f"--grid {args.grid!r}: expected V,U such as 9,9") from None
+    if args.angular_size:
+        options["angular_size"] = args.angular_size
+    lf, meta = read_lightfield_with_metadata(args.input, layout=args.layout, **options)
+    print(f"path:        {meta['source']}")
+    print(f"layout:      {meta['layout']}")
+    print(f"shape:       {lf.shape}  (V, U, Y, X{', C' if lf.ndim == 5 else ''})")
+    print(f"dtype:       {lf.dtype} (stored as {meta.get('file_dtype', '?')})")
+    print(f"value range: [{float(lf.min()):.6g}, {float(lf.max()):.6g}], mean {float(lf.mean()):.6g}")
+    rest = {k: v for k, v in meta.items() if k not in ("source", "layout", "shape", "dtype", "file_dtype")}
+    print("metadata:" + ("" if rest else "    (none)"))
+    for key, value in rest.items():
+        print(f"  {key}: {json.dumps(value, default=str)}")
+
+
 # ------------------------------------------------------------------ main
 
-_COMMANDS = ["simulate", "demo"]
+_COMMANDS = ["simulate", "demo", "info"]
 
 
 def build_parser() -> argparse.ArgumentParser:
