@@ -149,10 +149,9 @@ def probe_layout(path) -> str | None:
         layout = detect_layout(path)
         p = _as_path(path)
         if layout == "npy":
-            arr = np.load(p, mmap_mode="r", allow_pickle=False)
-            ok = arr.ndim in (4, 5)
-            del arr
-            return layout if ok else None
+            from ._arrays import npy_header
+
+            return layout if len(npy_header(p)[0]) in (4, 5) else None
         if layout == "npz":
             from ._arrays import _npz_headers, npz_lightfield_key
 

@@ -73,20 +73,29 @@ def _shape_error(shape, path, what="the array"):
 # ------------------------------------------------------------------ .npy / .npz
 
 
+def npy_header(path) -> tuple[tuple[int, ...], np.dtype]:
+    """Shape and dtype from a .npy header, without reading the data."""
+    with open(path, "rb") as fh:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, _fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+        else:
+            shape, _fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+    return tuple(shape), np.dtype(dtype)
+
+
 def read_npy(path, *, axes=None, value_range=None, max_bytes=None):
     path = Path(path)
     try:
-        mm = np.load(path, mmap_mode="r", allow_pickle=False)
+        shape, dtype = npy_header(path)
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: not a readable .npy file ({type(exc).__name__}: {exc})") from None
-    _shape_error(mm.shape, path)
-    check_memory(mm.shape, mm.dtype.itemsize, path, max_bytes=max_bytes)
+    _shape_error(shape, path)
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
     try:
-        raw = np.array(mm)
+        raw = np.load(path, allow_pickle=False)
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: cannot read the data, the file may be truncated ({exc})") from None
-    finally:
-        del mm
     return _finish(raw, path, {"layout": "npy"}, axes, value_range)
 
 
@@ -278,6 +287,8 @@ def read_h5(path, *, dataset=None, axes=None, value_range=None, max_bytes=None):
         cam = {**_attrs_to_dict(f.attrs), **_attrs_to_dict(ds.attrs)}
         cam = {k: v for k, v in cam.items() if k not in ("axes", "axis_order", "dims", "dimension_order",
                                                           "lfdeblur_axes")}
+        if "control_points" in cam:
+            meta["control_points"] = cam.pop("control_points")
         if cam:
             meta["camera"] = cam
         for holder in (ds.attrs, f.attrs):

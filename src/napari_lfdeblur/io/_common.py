@@ -149,7 +149,7 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
                 f"{path}: signed integer data has negative values; pass value_range=(lo, hi)"
             )
         out = arr.astype(np.float32)
-        out *= np.float32(1.0 / info.max)
+        out /= np.float32(info.max)  # divide (not multiply by 1/max): exact for every integer value
         return out
     out = arr.astype(np.float32, copy=arr.dtype != np.float32)
     if out.size and not np.isfinite(out).all():

@@ -18,6 +18,7 @@ Three naming schemes are recognised:
 from __future__ import annotations
 
 import configparser
+import json
 import math
 import os
 import re
@@ -271,4 +272,14 @@ def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None,
             "positions": [[list(pos.get((r, c), (math.nan, math.nan))) for c in range(U)] for r in range(V)],
             "positions_note": "the two numbers after out_RR_CC_ in each file name, per view (v, u)",
         }
+    saved = folder / "lightfield.json"
+    if saved.is_file():  # written by write_lightfield
+        try:
+            doc = json.loads(saved.read_text())
+            if isinstance(doc, dict):
+                meta["saved_metadata"] = doc
+                if "control_points" in doc:
+                    meta["control_points"] = doc["control_points"]
+        except (OSError, ValueError):
+            pass
     return lf, meta

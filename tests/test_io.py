@@ -1,0 +1,632 @@
+"""Tests of light-field reading and writing (napari_lfdeblur.io).
+
+Every reader test builds its file with an independent tool (imageio, tifffile,
+h5py, scipy.io, numpy) from a known light field and checks what comes back;
+every writer test reads its output back (and, where it can, with an
+independent tool too). Each bad-input case of issue 3 has its own test.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+from pathlib import Path
+
+import h5py
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import scipy.io
+import tifffile
+
+from napari_lfdeblur.io import (
+    InsufficientMemoryError,
+    LightFieldError,
+    LightFieldFormatError,
+    LightFieldReadError,
+    detect_layout,
+    probe_layout,
+    read_lightfield,
+    read_lightfield_with_metadata,
+    write_lightfield,
+)
+from napari_lfdeblur.io import _png, _views
+from napari_lfdeblur.path import load_path_json
+
+LYTRO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lytro-f01-img0001"
+
+V, U, Y, X = 3, 4, 6, 7
+
+
+@pytest.fixture
+def lf_rgb():
+    return np.random.default_rng(1).random((V, U, Y, X, 3)).astype(np.float32)
+
+
+@pytest.fixture
+def lf_gray():
+    return np.random.default_rng(2).random((V, U, Y, X)).astype(np.float32)
+
+
+def _u8(lf):
+    return np.rint(lf * 255).astype(np.uint8)
+
+
+def _u16(lf):
+    return np.rint(lf * 65535).astype(np.uint16)
+
+
+def _write_views(folder, img_lf, name, exts=".png"):
+    """Write each view of an integer light field with imageio under name(r, c)."""
+    folder.mkdir(exist_ok=True)
+    for r in range(img_lf.shape[0]):
+        for c in range(img_lf.shape[1]):
+            iio.imwrite(folder / (name(r, c) + exts), img_lf[r, c])
+    return folder
+
+
+def _lytro_views(folder, lf8):
+    """Lytro-toolbox names IMG_0007_KKK_RR_CC.png, KKK a serpentine sequence."""
+    Vn, Un = lf8.shape[:2]
+
+    def name(r, c):
+        k = r * Un + (c if r % 2 == 0 else Un - 1 - c) + 1
+        return f"IMG_0007_{k:03d}_{r + 1:02d}_{c + 1:02d}"
+
+    return _write_views(folder, lf8, name)
+
+
+# ------------------------------------------------------------------ real data
+
+
+@pytest.fixture(scope="module")
+def lytro():
+    if not LYTRO.is_dir():
+        pytest.skip(f"real data not found at {LYTRO}")
+    return read_lightfield_with_metadata(LYTRO)
+
+
+def test_real_lytro_folder(lytro):
+    lf, meta = lytro
+    assert lf.shape == (10, 10, 256, 256, 3)
+    assert lf.dtype == np.float32
+    assert meta["layout"] == "views" and meta["file_dtype"] == "uint8"
+    assert detect_layout(LYTRO) == "views"
+    # view (RR, CC) of file IMG_0001_KKK_RR_CC.png is lf[RR-1, CC-1]
+    for rr, cc in [(1, 1), (3, 4), (10, 1), (7, 9), (10, 10)]:
+        (f,) = LYTRO.glob(f"IMG_0001_*_{rr:02d}_{cc:02d}.png")
+        ref = iio.imread(f).astype(np.float32) / 255
+        np.testing.assert_allclose(lf[rr - 1, cc - 1], ref, atol=1e-6)
+    assert 0.0 <= lf.min() and lf.max() <= 1.0
+
+
+# ------------------------------------------------------------------ folder layouts
+
+
+def test_views_lytro_names_rgb8(tmp_path, lf_rgb):
+    lf8 = _u8(lf_rgb)
+    folder = _lytro_views(tmp_path / "cap", lf8)
+    (folder / "notes.txt").write_text("not a view")
+    out, meta = read_lightfield_with_metadata(folder)
+    assert meta["layout"] == "views" and meta["index_base"] == 1
+    np.testing.assert_array_equal(out, lf8.astype(np.float32) / 255)
+
+
+def test_views_gray16_zero_based(tmp_path, lf_gray):
+    lf16 = _u16(lf_gray)
+    folder = _write_views(tmp_path / "g", lf16, lambda r, c: f"sub_{r}_{c}")
+    out = read_lightfield(folder)
+    assert out.shape == (V, U, Y, X)
+    np.testing.assert_allclose(out, lf16 / 65535, atol=1e-7)
+
+
+def test_views_tiff16(tmp_path, lf_rgb):
+    lf16 = _u16(lf_rgb)
+    folder = tmp_path / "t"
+    folder.mkdir()
+    for r in range(V):
+        for c in range(U):
+            tifffile.imwrite(folder / f"view_{r + 1:02d}_{c + 1:02d}.tif", lf16[r, c], photometric="rgb")
+    np.testing.assert_allclose(read_lightfield(folder), lf16 / 65535, atol=1e-7)
+
+
+def test_views_jpeg(tmp_path, lf_rgb):
+    folder = _write_views(tmp_path / "j", _u8(lf_rgb), lambda r, c: f"v_{r + 1}_{c + 1}", ".jpg")
+    out = read_lightfield(folder)
+    ref = iio.imread(folder / "v_2_3.jpg").astype(np.float32) / 255
+    np.testing.assert_allclose(out[1, 2], ref, atol=1e-6)
+
+
+def test_views_hci(tmp_path, lf_rgb):
+    lf8 = _u8(lf_rgb[:3, :3])
+    folder = tmp_path / "boxes"
+    folder.mkdir()
+    for k in range(9):
+        iio.imwrite(folder / f"input_Cam{k:03d}.png", lf8[k // 3, k % 3])
+    iio.imwrite(folder / "valid_mask.png", lf8[0, 0, :, :, 0])  # an extra image that is not a view
+    (folder / "parameters.cfg").write_text(
+        "[intrinsics]\nfocal_length_mm = 100\nsensor_size_mm = 35\n\n"
+        "[extrinsics]\nnum_cams_x = 3\nbaseline_mm = 90.0\n\n[meta]\ndisp_min = -1.5\nscene = boxes\n"
+    )
+    out, meta = read_lightfield_with_metadata(folder)
+    assert meta["layout"] == "hci"
+    np.testing.assert_array_equal(out, lf8 / np.float32(255))
+    cam = meta["camera"]
+    assert cam["intrinsics"]["focal_length_mm"] == 100
+    assert cam["extrinsics"]["baseline_mm"] == 90.0
+    assert cam["meta"]["disp_min"] == -1.5 and cam["meta"]["scene"] == "boxes"
+
+
+def test_views_stanford(tmp_path, lf_rgb):
+    lf8 = _u8(lf_rgb)
+    folder = _write_views(
+        tmp_path / "lego", lf8, lambda r, c: f"out_{r:02d}_{c:02d}_{-10.5 * r:.6f}_{3.25 * c:.6f}_"
+    )
+    out, meta = read_lightfield_with_metadata(folder)
+    assert meta["layout"] == "stanford"
+    np.testing.assert_array_equal(out, lf8 / np.float32(255))
+    assert meta["camera"]["positions"][2][3] == [-21.0, 9.75]
+
+
+def test_views_pattern_option(tmp_path, lf_gray):
+    lf8 = _u8(lf_gray)
+    folder = _write_views(tmp_path / "p", lf8, lambda r, c: f"r{r + 1}c{c + 1}")
+    with pytest.raises(LightFieldFormatError):
+        read_lightfield(folder)  # no recognised naming scheme
+    out = read_lightfield(folder, layout="views", pattern=r"r(?P<row>\d+)c(?P<col>\d+)")
+    np.testing.assert_array_equal(out, lf8 / np.float32(255))
+
+
+# ------------------------------------------------------------------ single-image layouts
+
+
+def test_eslf_default_14(tmp_path):
+    A, Yl, Xl = 14, 3, 4
+    lf8 = np.random.default_rng(3).integers(0, 256, (A, A, Yl, Xl, 3), dtype=np.uint8)
+    mosaic = np.zeros((Yl * A, Xl * A, 3), np.uint8)
+    for v in range(A):
+        for u in range(A):
+            for y in range(Yl):
+                for x in range(Xl):
+                    mosaic[y * A + v, x * A + u] = lf8[v, u, y, x]
+    p = tmp_path / "scene.eslf.png"
+    iio.imwrite(p, mosaic)
+    assert detect_layout(p) == "eslf"
+    out, meta = read_lightfield_with_metadata(p)
+    assert meta["angular_size"] == 14
+    np.testing.assert_array_equal(out, lf8 / np.float32(255))
+    crop = read_lightfield(p, angular_crop=8)
+    np.testing.assert_array_equal(crop, lf8[3:11, 3:11] / np.float32(255))
+
+
+def test_eslf_angular_size_option_and_ambiguity(tmp_path, lf_gray):
+    A = 5
+    lf8 = _u8(np.random.default_rng(4).random((A, A, 8, 6)))
+    mosaic = lf8.transpose(2, 0, 3, 1).reshape(8 * A, 6 * A)  # (y, v, x, u)
+    p = tmp_path / "small.png"
+    iio.imwrite(p, mosaic)
+    out = read_lightfield(p, layout="eslf", angular_size=5)
+    np.testing.assert_array_equal(out, lf8 / np.float32(255))
+    with pytest.raises(LightFieldFormatError, match="angular_size"):
+        read_lightfield(p, layout="eslf")  # 40x30: sizes 2, 5 and 10 all divide it
+
+
+def test_view_grid_mosaic(tmp_path, lf_rgb):
+    lf8 = _u8(lf_rgb)
+    mosaic = np.zeros((V * Y, U * X, 3), np.uint8)
+    for v in range(V):
+        for u in range(U):
+            mosaic[v * Y : (v + 1) * Y, u * X : (u + 1) * X] = lf8[v, u]
+    p = tmp_path / "grid.png"
+    iio.imwrite(p, mosaic)
+    with pytest.raises(LightFieldFormatError, match="mosaic"):
+        read_lightfield(p)  # a plain image needs layout=
+    out = read_lightfield(p, layout="mosaic", grid=(V, U))
+    np.testing.assert_array_equal(out, lf8 / np.float32(255))
+    with pytest.raises(LightFieldFormatError, match="grid"):
+        read_lightfield(p, layout="mosaic")
+    with pytest.raises(LightFieldFormatError, match="does not split"):
+        read_lightfield(p, layout="mosaic", grid=(4, 4))
+
+
+# ------------------------------------------------------------------ MATLAB
+
+
+def test_mat_v5_drops_weight(tmp_path, lf_rgb):
+    lf16 = _u16(lf_rgb)
+    weight = np.full(lf16.shape[:4] + (1,), 65535, np.uint16)
+    p = tmp_path / "IMG_0001__Decoded.mat"
+    scipy.io.savemat(p, {"LF": np.concatenate([lf16, weight], axis=-1), "LensletGridModel": {"HSpacing": 14.2}})
+    out, meta = read_lightfield_with_metadata(p)
+    assert meta["layout"] == "mat" and meta["mat_version"] == "5" and meta["dropped_weight_channel"]
+    assert out.shape == (V, U, Y, X, 3)
+    np.testing.assert_allclose(out, lf16 / 65535, atol=1e-7)
+    assert meta["camera"]["LensletGridModel"]["HSpacing"] == pytest.approx(14.2)
+
+
+def test_mat_v73_axes_reversed(tmp_path, lf_rgb):
+    lf_w = np.concatenate([lf_rgb, np.ones(lf_rgb.shape[:4] + (1,), np.float32)], axis=-1)
+    p = tmp_path / "decoded_v73.mat"
+    with h5py.File(p, "w", userblock_size=512) as f:
+        f.create_dataset("LF", data=lf_w.T)  # MATLAB v7.3 stores (c, k, l, i, j)
+    with open(p, "r+b") as fh:  # MATLAB's text header lives in the user block
+        fh.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Nov 23 06:00:00 2026 HDF5 schema 1.00 .")
+    out, meta = read_lightfield_with_metadata(p)
+    assert meta["mat_version"] == "7.3"
+    np.testing.assert_array_equal(out, lf_rgb)
+
+
+# ------------------------------------------------------------------ arrays
+
+
+def test_hdf5_default_and_axes_attribute(tmp_path, lf_rgb):
+    p = tmp_path / "a.h5"
+    with h5py.File(p, "w") as f:
+        f.create_dataset("LF", data=lf_rgb)
+        f.attrs["focal_length_mm"] = 6.45
+    out, meta = read_lightfield_with_metadata(p)
+    np.testing.assert_array_equal(out, lf_rgb)
+    assert meta["camera"]["focal_length_mm"] == pytest.approx(6.45)
+
+    q = tmp_path / "b.hdf5"
+    with h5py.File(q, "w") as f:
+        f.create_dataset("meta/centre", data=np.zeros((Y, X)))
+        ds = f.create_dataset("scene/radiance", data=_u8(lf_rgb).transpose(3, 2, 4, 1, 0))  # x, y, c, u, v
+        ds.attrs["axes"] = "xycuv"
+    np.testing.assert_array_equal(read_lightfield(q), _u8(lf_rgb) / np.float32(255))
+    # the option overrides the attribute
+    with pytest.raises(LightFieldFormatError, match="axes"):
+        read_lightfield(q, axes="vuyx")
+
+
+def test_npy_npz_tiff_arrays(tmp_path, lf_rgb, lf_gray):
+    np.save(tmp_path / "a.npy", lf_gray)
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "a.npy"), lf_gray)
+    np.savez(tmp_path / "b.npz", lf=lf_rgb, disparity=np.zeros((Y, X)))
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "b.npz"), lf_rgb)
+    np.savez(tmp_path / "c.npz", something=_u16(lf_gray))
+    np.testing.assert_allclose(read_lightfield(tmp_path / "c.npz"), _u16(lf_gray) / 65535, atol=1e-7)
+    tifffile.imwrite(tmp_path / "d.tif", _u16(lf_gray))
+    np.testing.assert_allclose(read_lightfield(tmp_path / "d.tif"), _u16(lf_gray) / 65535, atol=1e-7)
+    np.save(tmp_path / "e.npy", lf_rgb * 255)
+    np.testing.assert_allclose(read_lightfield(tmp_path / "e.npy", value_range=(0, 255)), lf_rgb, atol=1e-6)
+
+
+def test_detect_and_probe(tmp_path, lf_gray):
+    np.save(tmp_path / "lf.npy", lf_gray)
+    np.save(tmp_path / "img.npy", lf_gray[0, 0])
+    iio.imwrite(tmp_path / "photo.png", _u8(lf_gray[0, 0]))
+    (tmp_path / "notes.txt").write_text("hello")
+    assert detect_layout(tmp_path / "lf.npy") == "npy"
+    assert probe_layout(tmp_path / "lf.npy") == "npy"
+    assert probe_layout(tmp_path / "img.npy") is None  # 2D: not claimed
+    assert probe_layout(tmp_path / "photo.png") is None
+    assert probe_layout(tmp_path / "notes.txt") is None
+    assert probe_layout(tmp_path / "missing.npz") is None
+    assert probe_layout(tmp_path) is None  # a folder with no views
+
+
+# ------------------------------------------------------------------ writers
+
+
+@pytest.mark.parametrize(
+    "name, kwargs, read_kwargs, atol",
+    [
+        ("lf.npz", {}, {}, 0),
+        ("lf.npy", {}, {}, 0),
+        ("lf.tif", {}, {}, 0),
+        ("lf16.tif", {"bit_depth": 16}, {}, 0.5 / 65535 + 1e-7),
+        ("lf.h5", {}, {}, 0),
+        ("views8", {}, {}, 0.5 / 255 + 1e-7),
+        ("views16", {"bit_depth": 16}, {}, 0.5 / 65535 + 1e-7),
+        ("grid.png", {"layout": "mosaic"}, {"layout": "mosaic", "grid": (V, U)}, 0.5 / 255 + 1e-7),
+    ],
+)
+@pytest.mark.parametrize("colour", [True, False])
+def test_writer_round_trip(tmp_path, lf_rgb, lf_gray, name, kwargs, read_kwargs, atol, colour):
+    lf = lf_rgb if colour else lf_gray
+    p = write_lightfield(tmp_path / name, lf, **kwargs)
+    out = read_lightfield(p, **read_kwargs)
+    assert out.shape == lf.shape and out.dtype == np.float32
+    np.testing.assert_allclose(out, lf, atol=atol, rtol=0)
+    leftovers = [q.name for q in tmp_path.iterdir() if q.name.startswith(".")]
+    assert leftovers == []
+
+
+def test_writer_eslf_round_trip(tmp_path, lf_rgb):
+    lf = lf_rgb[:3, :3]
+    p = write_lightfield(tmp_path / "x.eslf.png", lf, layout="eslf", bit_depth=16)
+    np.testing.assert_allclose(read_lightfield(p, angular_size=3), lf, atol=0.5 / 65535 + 1e-7)
+
+
+def test_writer_outputs_readable_by_other_tools(tmp_path, lf_rgb):
+    write_lightfield(tmp_path / "v", lf_rgb)
+    np.testing.assert_array_equal(iio.imread(tmp_path / "v" / "view_02_04.png"), _u8(lf_rgb[1, 3]))
+    write_lightfield(tmp_path / "a.h5", lf_rgb)
+    with h5py.File(tmp_path / "a.h5") as f:
+        np.testing.assert_array_equal(f["LF"][()], lf_rgb)
+        assert f["LF"].attrs["axes"] == "vuyxc"
+    write_lightfield(tmp_path / "a.tif", lf_rgb)
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "a.tif"), lf_rgb)
+    write_lightfield(tmp_path / "a.npz", lf_rgb)
+    np.testing.assert_array_equal(np.load(tmp_path / "a.npz")["lf"], lf_rgb)
+
+
+def test_png16_colour_codec_matches_values(tmp_path, lf_rgb):
+    # Pillow reads 16-bit colour PNGs as 8-bit; our reader must keep all 16 bits
+    img = _u16(lf_rgb[0, 0])
+    _png.write_png(tmp_path / "a.png", img)
+    np.testing.assert_array_equal(_png.read_png16(tmp_path / "a.png"), img)
+
+
+@pytest.mark.parametrize("ftype", [0, 1, 2, 3, 4])
+def test_png16_decoder_all_row_filters(tmp_path, ftype):
+    img = np.random.default_rng(ftype).integers(0, 65536, (5, 6, 3), dtype=np.uint16)
+    raw = img.astype(">u2").view(np.uint8).reshape(5, -1).astype(np.int64)
+    bpp = 6
+    rows = []
+    for r in range(5):  # reference PNG filter encoder (spec section 9)
+        cur = raw[r]
+        prev = raw[r - 1] if r else np.zeros_like(cur)
+        left = np.concatenate([np.zeros(bpp, np.int64), cur[:-bpp]])
+        upleft = np.concatenate([np.zeros(bpp, np.int64), prev[:-bpp]])
+        if ftype == 0:
+            pred = np.zeros_like(cur)
+        elif ftype == 1:
+            pred = left
+        elif ftype == 2:
+            pred = prev
+        elif ftype == 3:
+            pred = (left + prev) // 2
+        else:
+            p = left + prev - upleft
+            pa, pb, pc = np.abs(p - left), np.abs(p - prev), np.abs(p - upleft)
+            pred = np.where((pa <= pb) & (pa <= pc), left, np.where(pb <= pc, prev, upleft))
+        rows.append(bytes([ftype]) + bytes(((cur - pred) % 256).astype(np.uint8)))
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    blob = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 6, 5, 16, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"".join(rows))) + chunk(b"IEND", b""))
+    (tmp_path / "f.png").write_bytes(blob)
+    np.testing.assert_array_equal(_png.read_png16(tmp_path / "f.png"), img)
+
+
+def test_writer_camera_path_json(tmp_path, lf_gray):
+    cp = np.array([[0.0, 0.0, 0.0], [1.5, -0.5, 0.1], [2.0, 1.0, 0.0]])
+    write_lightfield(tmp_path / "res.npz", lf_gray, control_points=cp, metadata={"kind": "blind"})
+    np.testing.assert_allclose(load_path_json(tmp_path / "res.path.json"), cp)
+    _, meta = read_lightfield_with_metadata(tmp_path / "res.npz")
+    np.testing.assert_allclose(meta["control_points"], cp)
+    assert meta["saved_metadata"]["kind"] == "blind"
+    write_lightfield(tmp_path / "views", lf_gray, control_points=cp)
+    np.testing.assert_allclose(load_path_json(tmp_path / "views" / "path.json"), cp)
+
+
+def test_writer_never_overwrites_unless_asked(tmp_path, lf_gray):
+    p = write_lightfield(tmp_path / "a.npz", lf_gray)
+    with pytest.raises(FileExistsError, match="overwrite"):
+        write_lightfield(p, lf_gray * 0.5)
+    np.testing.assert_array_equal(read_lightfield(p), lf_gray)  # untouched
+    write_lightfield(p, lf_gray * 0.5, overwrite=True)
+    np.testing.assert_allclose(read_lightfield(p), lf_gray * 0.5)
+    folder = write_lightfield(tmp_path / "v", lf_gray)
+    with pytest.raises(FileExistsError):
+        write_lightfield(folder, lf_gray)
+    write_lightfield(folder, lf_gray[:2, :2] * 0.5, overwrite=True)  # fewer views: old ones gone
+    assert read_lightfield(folder).shape == (2, 2, Y, X)
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "thesis.docx").write_text("precious")
+    with pytest.raises(FileExistsError, match="not light-field views"):
+        write_lightfield(tmp_path / "mine", lf_gray, overwrite=True)
+    assert (tmp_path / "mine" / "thesis.docx").read_text() == "precious"
+
+
+def test_writer_failure_leaves_nothing(tmp_path, lf_gray, monkeypatch):
+    import napari_lfdeblur.io._write as w
+
+    calls = {"n": 0}
+    real = w.write_png
+
+    def failing(path, img, **kw):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise OSError("disk full")
+        return real(path, img, **kw)
+
+    monkeypatch.setattr(w, "write_png", failing)
+    with pytest.raises(OSError, match="disk full"):
+        write_lightfield(tmp_path / "v", lf_gray)
+    monkeypatch.setattr(w.np, "savez_compressed", lambda *a, **k: (_ for _ in ()).throw(OSError("disk full")))
+    with pytest.raises(OSError, match="disk full"):
+        write_lightfield(tmp_path / "a.npz", lf_gray)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_writer_rejects_bad_arrays(tmp_path, lf_gray):
+    with pytest.raises(LightFieldFormatError, match="3D"):
+        write_lightfield(tmp_path / "a.npz", lf_gray[0])
+    bad = lf_gray.copy()
+    bad[0, 0, 0, 0] = np.nan
+    with pytest.raises(LightFieldFormatError, match="NaN"):
+        write_lightfield(tmp_path / "a.npz", bad)
+    with pytest.raises(ValueError, match="PNG"):
+        write_lightfield(tmp_path / "v", lf_gray, bit_depth=32)
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------ bad input, one test per case
+
+
+@pytest.fixture
+def views8(tmp_path, lf_rgb):
+    return _write_views(tmp_path / "views", _u8(lf_rgb), lambda r, c: f"view_{r + 1:02d}_{c + 1:02d}")
+
+
+def test_bad_missing_view(views8):
+    (views8 / "view_02_03.png").unlink()
+    with pytest.raises(LightFieldFormatError, match=r"missing.*\(2, 3\)") as exc:
+        read_lightfield(views8)
+    assert str(views8) in str(exc.value)
+
+
+def test_bad_missing_hci_view(tmp_path, lf_gray):
+    folder = tmp_path / "hci"
+    folder.mkdir()
+    for k in range(9):
+        if k != 4:
+            iio.imwrite(folder / f"input_Cam{k:03d}.png", _u8(lf_gray[0, 0]))
+    with pytest.raises(LightFieldFormatError, match="input_Cam004"):
+        read_lightfield(folder)
+
+
+def test_bad_views_of_different_sizes(views8, lf_rgb):
+    iio.imwrite(views8 / "view_03_02.png", _u8(lf_rgb[2, 1, :-1]))
+    with pytest.raises(LightFieldFormatError, match="view_03_02.png.*same size"):
+        read_lightfield(views8)
+
+
+def test_bad_views_of_different_dtypes(views8, lf_rgb):
+    _png.write_png(views8 / "view_01_02.png", _u16(lf_rgb[0, 1]))
+    with pytest.raises(LightFieldFormatError, match="view_01_02.png.*bit depth"):
+        read_lightfield(views8)
+
+
+def test_bad_truncated_image(views8):
+    f = views8 / "view_02_02.png"
+    f.write_bytes(f.read_bytes()[:60])
+    with pytest.raises(LightFieldReadError, match="view_02_02.png") as exc:
+        read_lightfield(views8)
+    assert isinstance(exc.value, OSError) and isinstance(exc.value, ValueError)
+
+
+def test_bad_truncated_16bit_colour_png(tmp_path, lf_rgb):
+    folder = write_lightfield(tmp_path / "v16", lf_rgb, bit_depth=16)
+    f = folder / "view_03_04.png"
+    f.write_bytes(f.read_bytes()[:-30])
+    with pytest.raises(LightFieldReadError, match="view_03_04.png.*truncated"):
+        read_lightfield(folder)
+
+
+def test_bad_corrupt_image(views8):
+    f = views8 / "view_01_01.png"
+    data = bytearray(f.read_bytes())
+    data[50:70] = b"\x00" * 20  # inside the image data: CRC / zlib fail
+    f.write_bytes(bytes(data))
+    with pytest.raises(LightFieldReadError, match="view_01_01.png"):
+        read_lightfield(views8)
+
+
+def test_bad_non_image_with_image_extension(views8):
+    (views8 / "view_03_01.png").write_text("this is a text file, not a PNG\n")
+    with pytest.raises(LightFieldReadError, match="view_03_01.png.*not an image"):
+        read_lightfield(views8)
+
+
+@pytest.mark.parametrize("ndim", [2, 3])
+@pytest.mark.parametrize("suffix", [".npy", ".npz", ".tif", ".h5"])
+def test_bad_2d_or_3d_array(tmp_path, lf_gray, ndim, suffix):
+    arr = lf_gray[0, 0] if ndim == 2 else lf_gray[0]
+    p = tmp_path / f"a{suffix}"
+    if suffix == ".npy":
+        np.save(p, arr)
+    elif suffix == ".npz":
+        np.savez(p, lf=arr)
+    elif suffix == ".tif":
+        tifffile.imwrite(p, arr)
+    else:
+        with h5py.File(p, "w") as f:
+            f["LF"] = arr
+    with pytest.raises(LightFieldFormatError, match=f"{ndim}D") as exc:
+        read_lightfield(p)
+    assert p.name in str(exc.value)
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize("suffix", [".npy", ".h5", ".tif"])
+def test_bad_nan_or_inf(tmp_path, lf_gray, value, suffix):
+    arr = lf_gray.copy()
+    arr[1, 2, 3, 4] = value
+    p = tmp_path / f"a{suffix}"
+    if suffix == ".npy":
+        np.save(p, arr)
+    elif suffix == ".tif":
+        tifffile.imwrite(p, arr)
+    else:
+        with h5py.File(p, "w") as f:
+            f["LF"] = arr
+    with pytest.raises(LightFieldFormatError, match="NaN or Inf") as exc:
+        read_lightfield(p)
+    assert p.name in str(exc.value)
+
+
+def test_bad_path_does_not_exist(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nothing_here"):
+        read_lightfield(tmp_path / "nothing_here")
+    with pytest.raises(FileNotFoundError):
+        detect_layout(tmp_path / "nothing_here.npz")
+
+
+def test_bad_too_big_for_memory_checked_before_allocating(tmp_path):
+    # a 128-byte .npy whose header claims a 4 TB light field: must fail on the header alone
+    p = tmp_path / "huge.npy"
+    with open(p, "wb") as fh:
+        np.lib.format.write_array_header_1_0(
+            fh, {"descr": "<f4", "fortran_order": False, "shape": (100, 100, 10000, 10000)}
+        )
+    with pytest.raises(InsufficientMemoryError, match="huge.npy.*needs about") as exc:
+        read_lightfield(p)
+    assert isinstance(exc.value, LightFieldError) and isinstance(exc.value, MemoryError)
+
+
+def test_bad_too_big_views_checked_before_decoding(views8, monkeypatch):
+    decoded = []
+    monkeypatch.setattr(_views, "read_image", lambda p: decoded.append(p))
+    with pytest.raises(InsufficientMemoryError, match="views"):
+        read_lightfield(views8, max_bytes=5_000)  # 1512 uint8 samples + their float32 copy: 7560 B
+    monkeypatch.setenv("LFDEBLUR_MEMORY_LIMIT", "5000")
+    with pytest.raises(InsufficientMemoryError):
+        read_lightfield(views8)
+    assert decoded == []
+
+
+def test_bad_options_and_types(tmp_path, lf_gray):
+    np.save(tmp_path / "a.npy", lf_gray)
+    with pytest.raises(TypeError, match="grid"):
+        read_lightfield(tmp_path / "a.npy", grid=(2, 2))
+    with pytest.raises(ValueError, match="unknown layout"):
+        read_lightfield(tmp_path / "a.npy", layout="lytro-raw")
+    (tmp_path / "a.xyz").write_text("?")
+    with pytest.raises(LightFieldFormatError, match="unknown light-field file type"):
+        read_lightfield(tmp_path / "a.xyz")
+    np.save(tmp_path / "b.npy", lf_gray * 3)
+    with pytest.raises(LightFieldFormatError, match="value_range"):
+        read_lightfield(tmp_path / "b.npy")
+
+
+# ------------------------------------------------------------------ CLI
+
+
+def test_cli_info(tmp_path, lf_rgb, capsys):
+    from napari_lfdeblur.cli import main
+
+    write_lightfield(tmp_path / "v", lf_rgb, bit_depth=16)
+    assert main(["info", str(tmp_path / "v")]) == 0
+    out = capsys.readouterr().out
+    assert "layout:      views" in out
+    assert f"shape:       {lf_rgb.shape}" in out
+    assert "float32 (stored as uint16)" in out
+    lo, hi = (float(s) for s in out.split("value range: [")[1].split("]")[0].split(","))
+    assert lo == pytest.approx(lf_rgb.min(), abs=1e-4) and hi == pytest.approx(lf_rgb.max(), abs=1e-4)
+    assert "saved_metadata" in out
+    assert main(["info", str(tmp_path / "missing")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_metadata_is_json_serialisable(tmp_path, lf_rgb):
+    write_lightfield(tmp_path / "a.h5", lf_rgb, metadata={"kind": "x"}, control_points=[[0, 0, 0], [1, 1, 0]])
+    _, meta = read_lightfield_with_metadata(tmp_path / "a.h5")
+    assert json.loads(json.dumps(meta))["source"].endswith("a.h5")
+    assert meta["layout"] == "h5" and meta["shape"] == list(lf_rgb.shape)
