@@ -1,0 +1,255 @@
+"""The napari dock widgets, end to end on tiny light fields (run under xvfb).
+
+    xvfb-run -a .venv/bin/python -m pytest tests/test_widgets.py
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("napari")
+pytest.importorskip("pytestqt")
+
+import napari_lfdeblur  # noqa: E402
+from napari_lfdeblur.blur import simulate_blur  # noqa: E402
+from napari_lfdeblur.path import bezier_positions  # noqa: E402
+
+SHAPE = (5, 5, 16, 16)
+TIMEOUT = 30_000  # ms
+
+
+@pytest.fixture
+def lf():
+    rng = np.random.default_rng(1)
+    return rng.random(SHAPE).astype(np.float32)
+
+
+@pytest.fixture
+def notifications(monkeypatch):
+    """Messages shown through the widgets' notification helpers."""
+    from napari_lfdeblur._napari.widgets import _common
+
+    seen = []
+    monkeypatch.setattr(_common, "show_error", lambda msg: seen.append(("error", msg)))
+    monkeypatch.setattr(_common, "show_info", lambda msg: seen.append(("info", msg)))
+    monkeypatch.setattr(_common, "show_warning", lambda msg: seen.append(("warning", msg)))
+    return seen
+
+
+def _dock(viewer, widget):
+    viewer.window.add_dock_widget(widget)
+    return widget
+
+
+def _wait_done(qtbot, widget):
+    qtbot.waitUntil(lambda: not widget.is_running, timeout=TIMEOUT)
+
+
+# ------------------------------------------------------------ simulate
+
+
+def test_simulate_adds_blurred_and_path_layers(make_napari_viewer, qtbot, lf, notifications):
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+
+    viewer = make_napari_viewer()
+    src = viewer.add_image(lf.copy(), name="sharp")
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.layer_combo.set_layer(src)
+    w.preset_combo.setCurrentText("arc")
+    w.extent_spin.setValue(1.5)
+    w.apply_preset()
+    w.table.table.item(0, 2).setText("0.25")  # typed-in edit: p_z of the first point
+    w.n_times_spin.setValue(8)
+    w.d_inf_spin.setValue(0.5)
+    cp = w.table.control_points()
+    assert cp[0, 2] == 0.25
+    assert w.run() is not None
+    _wait_done(qtbot, w)
+    assert not [n for n in notifications if n[0] == "error"], notifications
+
+    blurred = viewer.layers["sharp blurred"]
+    expected = simulate_blur(lf, cp, n_times=8, infinity_disparity=0.5)
+    assert blurred.data.shape == SHAPE
+    np.testing.assert_allclose(blurred.data, expected, atol=1e-6)
+    assert blurred.axis_labels == ("v", "u", "y", "x")
+    meta = blurred.metadata
+    assert meta["lfdeblur_version"] == napari_lfdeblur.__version__
+    np.testing.assert_allclose(meta["control_points"], cp)
+    assert meta["n_times"] == 8 and meta["infinity_disparity"] == 0.5
+    assert meta["source_layer"] == "sharp"
+    # the input layer is untouched
+    np.testing.assert_array_equal(src.data, lf)
+
+    path = viewer.layers["sharp blurred path"]
+    assert path.shape_type == ["rectangle", "path", "ellipse"]
+    s = path.metadata["pixels_per_view"]
+    assert s == pytest.approx(16 / (2 * 5))
+    pos = bezier_positions(cp, 8)
+    np.testing.assert_allclose(path.data[1][:, 0], 7.5 + s * pos[:, 1])
+    np.testing.assert_allclose(path.data[1][:, 1], 7.5 + s * pos[:, 0])
+
+
+def test_simulate_random_path_is_seeded(make_napari_viewer, lf):
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+    from napari_lfdeblur.path import random_path
+
+    viewer = make_napari_viewer()
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.n_points_spin.setValue(5)
+    w.seed_spin.setValue(7)
+    w.extent_spin.setValue(3.0)
+    w.apply_random()
+    np.testing.assert_allclose(w.table.control_points(), random_path(5, 3.0, seed=7), atol=1e-5)
+
+
+def test_simulate_colour_layer(make_napari_viewer, qtbot):
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+
+    rgb = np.random.default_rng(2).random((3, 3, 8, 8, 3)).astype(np.float32)
+    viewer = make_napari_viewer()
+    viewer.add_image(rgb, name="rgb", rgb=True)
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.n_times_spin.setValue(4)
+    w.run()
+    _wait_done(qtbot, w)
+    out = viewer.layers["rgb blurred"]
+    assert out.rgb and out.data.shape == rgb.shape
+    np.testing.assert_allclose(out.data, simulate_blur(rgb, w.table.control_points(), n_times=4), atol=1e-6)
+
+
+# -------------------------------------------------- bad inputs -> notes
+
+
+def test_2d_layer_and_empty_selection_notify(make_napari_viewer, notifications):
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+
+    viewer = make_napari_viewer()
+    widgets = [_dock(viewer, cls(viewer)) for cls in (SimulateBlurWidget, DeconvolveWidget, BlindDeblurWidget)]
+    # empty selection
+    for w in widgets:
+        assert w.run() is None
+    assert len([n for n in notifications if n[0] == "error"]) == 3
+    assert all("no light-field layer" in msg for kind, msg in notifications)
+    # a 2D image
+    notifications.clear()
+    viewer.add_image(np.zeros((16, 16), np.float32), name="flat")
+    for w in widgets:
+        w.layer_combo.set_layer("flat")
+        assert w.run() is None
+        assert not w.is_running
+    errors = [msg for kind, msg in notifications if kind == "error"]
+    assert len(errors) == 3 and all("'flat'" in m and "4D" in m for m in errors)
+    assert len(viewer.layers) == 1
+
+
+def test_bad_table_entry_notifies(make_napari_viewer, lf, notifications):
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+
+    viewer = make_napari_viewer()
+    viewer.add_image(lf, name="sharp")
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.table.table.item(1, 0).setText("abc")
+    assert w.run() is None
+    assert notifications and "not a number" in notifications[-1][1]
+    assert len(viewer.layers) == 1
+
+
+# ---------------------------------------------------------- deconvolve
+
+
+def test_deconvolve_takes_path_from_metadata(make_napari_viewer, qtbot, lf, notifications):
+    from napari_lfdeblur._napari.layers import lightfield_layer_data, lightfield_metadata, add_layer
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+    from napari_lfdeblur.deconvolution import deconvolve
+    from napari_lfdeblur.path import linear_path
+
+    cp = linear_path(1.5, angle_deg=30)
+    blurred = simulate_blur(lf, cp, n_times=8)
+    viewer = make_napari_viewer()
+    meta = lightfield_metadata(kind="blurred", control_points=cp, n_times=8, infinity_disparity=0.0)
+    layer = add_layer(viewer, lightfield_layer_data(blurred, name="b", metadata=meta))
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    # the path, T and d_inf came from the layer's metadata
+    np.testing.assert_allclose(w.table.control_points(), cp)
+    assert w.n_times_spin.value() == 8
+    w.method_combo.setCurrentText("inplane")
+    w.weight_spin.setValue(0.0)
+    w.run()
+    _wait_done(qtbot, w)
+    assert not [n for n in notifications if n[0] == "error"], notifications
+    out = viewer.layers["b deconvolved"]
+    assert out.data.shape == SHAPE and out.axis_labels == ("v", "u", "y", "x")
+    # exact in-plane inverse recovers the sharp light field
+    np.testing.assert_allclose(out.data, lf, atol=2e-3)
+    np.testing.assert_allclose(out.data, deconvolve(blurred, cp, n_times=8, method="inplane", weight=0.0), atol=1e-6)
+    assert out.metadata["parameters"]["method"] == "inplane"
+    assert out.metadata["lfdeblur_version"] == napari_lfdeblur.__version__
+    np.testing.assert_allclose(out.metadata["control_points"], cp)
+    np.testing.assert_array_equal(layer.data, blurred)
+
+
+def test_deconvolve_tv_with_path_from_path_layer(make_napari_viewer, qtbot, lf, notifications):
+    from napari_lfdeblur._napari.layers import add_layer, path_layer_data
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+    from napari_lfdeblur.deconvolution import deconvolve
+
+    cp = np.array([[-0.5, 0.2, 0.1], [0.6, -0.3, -0.1]])
+    blurred = simulate_blur(lf, cp, n_times=6)
+    viewer = make_napari_viewer()
+    viewer.add_image(blurred, name="b")
+    add_layer(viewer, path_layer_data(cp, SHAPE, n_times=6, name="some path"))
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    w.layer_combo.set_layer("b")
+    w.path_layer_combo.set_layer("some path")
+    w.take_path()
+    np.testing.assert_allclose(w.table.control_points(), cp)
+    assert w.n_times_spin.value() == 6
+    w.method_combo.setCurrentText("tv")
+    w.iter_spin.setValue(5)
+    w.run()
+    _wait_done(qtbot, w)
+    assert not [n for n in notifications if n[0] == "error"], notifications
+    out = viewer.layers["b deconvolved"].data
+    ref = deconvolve(blurred, cp, n_times=6, method="tv", weight=w.weight_spin.value(), n_iter=5)
+    np.testing.assert_allclose(out, ref, atol=1e-5)
+
+
+def test_deconvolve_solver_error_is_a_notification(make_napari_viewer, qtbot, lf, notifications):
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+
+    viewer = make_napari_viewer()
+    viewer.add_image(lf, name="b")
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    w.table.set_control_points([[0, 0, 0.5], [1, 0, 0]])  # not in-plane
+    w.method_combo.setCurrentText("inplane")
+    w.run()
+    _wait_done(qtbot, w)
+    assert [n for n in notifications if n[0] == "error"]
+    assert len(viewer.layers) == 1
+
+
+# ----------------------------------------------------------------- EPI
+
+
+def test_epi_layers_follow_the_pick(make_napari_viewer, lf):
+    from napari_lfdeblur._napari.widgets._common import EpiPanel
+
+    viewer = make_napari_viewer()
+    viewer.add_image(lf, name="lf")
+    panel = EpiPanel(viewer)
+    viewer.window.add_dock_widget(panel)
+    panel.layer_combo.set_layer("lf")
+    h, v = panel.show_epis()
+    np.testing.assert_array_equal(h.data, lf[2, :, 8, :])
+    np.testing.assert_array_equal(v.data, lf[:, 2, :, 8].T)
+    panel.y_spin.setValue(3)
+    panel.v_spin.setValue(1)
+    np.testing.assert_array_equal(viewer.layers["lf EPI h"].data, lf[1, :, 3, :])
+    panel.x_spin.setValue(11)
+    np.testing.assert_array_equal(viewer.layers["lf EPI v"].data, lf[:, 2, :, 11].T)
+    assert viewer.layers["lf EPI h"].metadata["y"] == 3
+    assert len(viewer.layers) == 3  # updated in place, not added again
