@@ -1,0 +1,190 @@
+"""Speed and memory of the blur operator, against a straightforward grid_sample version.
+
+Usage::
+
+    python benchmarks/bench_forward.py [--shape 9 9 376 541 3] [--n-times 16] [--device auto|cpu|cuda]
+
+For each implementation it prints the forward time, the forward+backward
+time (loss ``0.5 ||f - b||^2``, gradients for the light field and the control
+points) and the peak memory above the baseline during forward+backward, in
+units of the light field's size. The baseline is the memory in use once the
+light field, the target and the path exist. Each implementation runs in its
+own subprocess, so peaks don't mix.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from napari_lfdeblur.blur import BlurOperator, normalized_coordinates
+from napari_lfdeblur.devices import select_device
+from napari_lfdeblur.path import bezier_positions, random_path
+
+
+def gridsample_blur(L, control_points, n_times):
+    """The MODEL.md forward model (d_inf = 0) written directly with grid_sample.
+
+    ``L`` is (V, U, Y, X, C). Every pixel is a batch item whose (V, U) image
+    is sampled at the shifted angular coordinates, once per instant.
+    """
+    V, U, Y, X, C = L.shape
+    pos = bezier_positions(control_points, n_times)
+    r = max(X, Y) / 2
+    xt = normalized_coordinates(X, r, L.dtype, L.device)
+    yt = normalized_coordinates(Y, r, L.dtype, L.device)
+    img = L.permute(2, 3, 4, 0, 1).reshape(Y * X, C, V, U)
+    vv = torch.arange(V, dtype=L.dtype, device=L.device)
+    uu = torch.arange(U, dtype=L.dtype, device=L.device)
+    out = 0
+    for k in range(n_times):
+        su = pos[k, 0] - xt * pos[k, 2]  # (X,)
+        sv = pos[k, 1] - yt * pos[k, 2]  # (Y,)
+        cu = uu[None, None, None, :] + su[None, :, None, None]  # (1, X, 1, U)
+        cv = vv[None, None, :, None] + sv[:, None, None, None]  # (Y, 1, V, 1)
+        gx = (cu / max(U - 1, 1)) * 2 - 1
+        gy = (cv / max(V - 1, 1)) * 2 - 1
+        gx, gy = torch.broadcast_tensors(gx, gy)  # (Y, X, V, U)
+        grid = torch.stack([gx, gy], dim=-1).reshape(Y * X, V, U, 2)
+        out = out + F.grid_sample(img, grid, mode="bilinear", padding_mode="border", align_corners=True)
+    out = out / n_times
+    return out.reshape(Y, X, C, V, U).permute(3, 4, 0, 1, 2)
+
+
+class PeakRSS:
+    """Peak resident memory of this process, sampled every millisecond in a thread."""
+
+    def __init__(self):
+        import psutil
+
+        self.proc = psutil.Process(os.getpid())
+        self.peak = 0
+        self._stop = threading.Event()
+
+    def __enter__(self):
+        self.base = self.proc.memory_info().rss
+        self.peak = self.base
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        return self
+
+    def _run(self):
+        while not self._stop.is_set():
+            self.peak = max(self.peak, self.proc.memory_info().rss)
+            time.sleep(0.001)
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, self.proc.memory_info().rss)
+
+
+def _sync(device):
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+
+
+def run_variant(variant, shape, n_times, device, repeats):
+    device = select_device(device)
+    torch.manual_seed(0)
+    L = torch.rand(shape, device=device)
+    cp0 = random_path(4, extent=3.0, z_extent=1.0, seed=1)
+    target = torch.rand(shape, device=device)
+    lf_bytes = L.numel() * L.element_size()
+
+    def forward(L, cp):
+        if variant == "ours":
+            return BlurOperator(shape, cp, n_times=n_times, device=device).forward(L)
+        return gridsample_blur(L, cp, n_times)
+
+    def fwd_bwd():
+        Lg = L.detach().requires_grad_(True)
+        cp = torch.tensor(cp0, dtype=torch.float32, device=device, requires_grad=True)
+        loss = 0.5 * F.mse_loss(forward(Lg, cp), target, reduction="sum")
+        loss.backward()
+        return Lg.grad, cp.grad
+
+    with torch.no_grad():
+        forward(L, torch.tensor(cp0, dtype=torch.float32, device=device))  # warm-up
+    t_fwd = []
+    for _ in range(repeats):
+        _sync(device)
+        t0 = time.perf_counter()
+        with torch.no_grad():
+            out = forward(L, torch.tensor(cp0, dtype=torch.float32, device=device))
+        _sync(device)
+        t_fwd.append(time.perf_counter() - t0)
+        del out
+    t_fb = []
+    peak_extra = 0.0
+    for _ in range(repeats):
+        if device.type == "cuda":
+            torch.cuda.reset_peak_memory_stats()
+            base = torch.cuda.memory_allocated()
+        _sync(device)
+        with PeakRSS() as mem:
+            t0 = time.perf_counter()
+            grads = fwd_bwd()
+            _sync(device)
+            t_fb.append(time.perf_counter() - t0)
+        if device.type == "cuda":
+            extra = torch.cuda.max_memory_allocated() - base
+        else:
+            extra = mem.peak - mem.base
+        peak_extra = max(peak_extra, extra / lf_bytes)
+        del grads
+    return {
+        "variant": variant,
+        "device": str(device),
+        "forward_s": min(t_fwd),
+        "forward_backward_s": min(t_fb),
+        "peak_extra_x_lf": peak_extra,
+        "lf_mb": lf_bytes / 2**20,
+    }
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--shape", type=int, nargs="+", default=[9, 9, 376, 541, 3])
+    parser.add_argument("--n-times", type=int, default=16)
+    parser.add_argument("--device", default="auto")
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--variant", choices=["ours", "grid_sample"], help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    shape = tuple(args.shape)
+    if args.variant:  # child process: one measurement, as JSON
+        print(json.dumps(run_variant(args.variant, shape, args.n_times, args.device, args.repeats)))
+        return
+    device = select_device(args.device)
+    print(f"blur operator, {shape} float32, T = {args.n_times}, device {device}, torch {torch.__version__}, "
+          f"{torch.get_num_threads()} threads")
+    rows = []
+    for variant in ("ours", "grid_sample"):
+        cmd = [sys.executable, __file__, "--variant", variant, "--shape", *map(str, shape),
+               "--n-times", str(args.n_times), "--device", str(device), "--repeats", str(args.repeats)]
+        res = subprocess.run(cmd, capture_output=True, text=True)
+        if res.returncode != 0:
+            print(f"{variant} failed:\n{res.stderr[-2000:]}")
+            continue
+        rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
+    print(f"{'implementation':<14} {'forward (s)':>12} {'fwd+bwd (s)':>12} {'peak extra (x LF)':>18}")
+    for r in rows:
+        print(f"{r['variant']:<14} {r['forward_s']:>12.3f} {r['forward_backward_s']:>12.3f} {r['peak_extra_x_lf']:>18.2f}")
+    if len(rows) == 2:
+        ours, ref = rows
+        print(f"speed-up of ours over grid_sample: forward {ref['forward_s'] / ours['forward_s']:.1f}x, "
+              f"forward+backward {ref['forward_backward_s'] / ours['forward_backward_s']:.1f}x")
+    print(f"(light field size: {rows[0]['lf_mb']:.0f} MiB)" if rows else "")
+
+
+if __name__ == "__main__":
+    main()
