@@ -1,0 +1,107 @@
+"""napari side of light-field I/O: the npe2 reader and writers.
+
+The viewer tests need Qt; run them with ``xvfb-run -a python -m pytest``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from napari_lfdeblur.io import read_lightfield, write_lightfield
+
+LYTRO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lytro-f01-img0001"
+
+
+@pytest.fixture
+def lf_rgb():
+    return np.random.default_rng(5).random((3, 4, 6, 7, 3)).astype(np.float32)
+
+
+# ------------------------------------------------------------------ hook, no viewer
+
+
+def test_get_reader_claims_only_light_fields(tmp_path, lf_rgb):
+    import imageio.v3 as iio
+
+    from napari_lfdeblur._napari.reader import napari_get_reader
+
+    write_lightfield(tmp_path / "views", lf_rgb)
+    write_lightfield(tmp_path / "lf.npz", lf_rgb)
+    np.save(tmp_path / "image.npy", lf_rgb[0, 0])
+    iio.imwrite(tmp_path / "photo.png", (lf_rgb[0, 0] * 255).astype(np.uint8))
+    (tmp_path / "broken.h5").write_bytes(b"\x89HDF\r\n\x1a\n garbage")
+    assert callable(napari_get_reader(str(tmp_path / "views")))
+    assert callable(napari_get_reader([str(tmp_path / "lf.npz")]))
+    for p in ["image.npy", "photo.png", "broken.h5", "nope.npz", "empty_dir"]:
+        assert napari_get_reader(str(tmp_path / p)) is None, p
+    assert napari_get_reader([str(tmp_path / "lf.npz"), str(tmp_path / "views")]) is None
+    assert napari_get_reader(None) is None
+    assert napari_get_reader(12) is None
+
+
+def test_reader_layer_tuple(tmp_path, lf_rgb):
+    from napari_lfdeblur._napari.reader import napari_get_reader
+
+    write_lightfield(tmp_path / "scene.h5", lf_rgb[..., 0])
+    ((data, kw, kind),) = napari_get_reader(str(tmp_path / "scene.h5"))(str(tmp_path / "scene.h5"))
+    assert kind == "image" and kw["name"] == "scene"
+    assert kw["axis_labels"] == ("v", "u", "y", "x") and kw["rgb"] is False
+    assert kw["metadata"]["layout"] == "h5" and kw["metadata"]["source"].endswith("scene.h5")
+    np.testing.assert_array_equal(data, lf_rgb[..., 0])
+
+
+def test_writer_functions(tmp_path, lf_rgb):
+    from napari_lfdeblur._napari.writer import write_h5, write_npz, write_tiff
+
+    cp = [[0.0, 0.0, 0.0], [1.0, 0.5, 0.0]]
+    attrs = {"name": "deblurred", "metadata": {"kind": "blind", "control_points": cp}}
+    for fn, name in [(write_npz, "a"), (write_tiff, "b.tif"), (write_h5, "c.hdf5")]:
+        written = fn(str(tmp_path / name), lf_rgb, attrs)
+        assert Path(written[0]).exists() and Path(written[1]).name.endswith(".path.json")
+        np.testing.assert_array_equal(read_lightfield(written[0]), lf_rgb)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "a.npz", "a.path.json", "b.path.json", "b.tif", "c.hdf5", "c.path.json"]
+    with pytest.raises(ValueError, match="4D"):
+        write_npz(str(tmp_path / "d.npz"), lf_rgb[0, 0], {"name": "img"})
+    with pytest.raises(FileExistsError):
+        write_npz(str(tmp_path / "a.npz"), lf_rgb, {"name": "again"})
+
+
+# ------------------------------------------------------------------ viewer
+
+
+def test_viewer_open_folder(make_napari_viewer, tmp_path, lf_rgb):
+    folder = write_lightfield(tmp_path / "capture", lf_rgb, bit_depth=16)
+    viewer = make_napari_viewer()
+    layers = viewer.open(str(folder), plugin="napari-lfdeblur")
+    assert len(layers) == 1 and len(viewer.layers) == 1
+    layer = viewer.layers[0]
+    assert layer.data.shape == lf_rgb.shape and layer.rgb
+    assert tuple(layer.axis_labels) == ("v", "u", "y", "x")
+    assert layer.metadata["layout"] == "views"
+    np.testing.assert_allclose(layer.data, lf_rgb, atol=0.5 / 65535 + 1e-7)
+    # the two view axes are the sliders
+    assert viewer.dims.ndim == 4 and tuple(viewer.dims.axis_labels) == ("v", "u", "y", "x")
+
+
+def test_viewer_open_real_lytro(make_napari_viewer):
+    if not LYTRO.is_dir():
+        pytest.skip(f"real data not found at {LYTRO}")
+    viewer = make_napari_viewer()
+    viewer.open(str(LYTRO), plugin="napari-lfdeblur")
+    (layer,) = viewer.layers
+    assert layer.data.shape == (10, 10, 256, 256, 3) and layer.rgb
+    assert tuple(layer.axis_labels) == ("v", "u", "y", "x")
+
+
+def test_viewer_save_layer_with_plugin_writer(make_napari_viewer, tmp_path, lf_rgb):
+    viewer = make_napari_viewer()
+    viewer.add_image(lf_rgb[..., 1], name="lf", metadata={"kind": "input"})
+    out = tmp_path / "saved.npz"
+    viewer.layers.save(str(out), selected=False, plugin="napari-lfdeblur")
+    np.testing.assert_array_equal(read_lightfield(out), lf_rgb[..., 1])
+    viewer.layers.save(str(tmp_path / "saved.tif"), plugin="napari-lfdeblur")
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "saved.tif"), lf_rgb[..., 1])
