@@ -41,6 +41,8 @@ _PUBLIC = {
     # I/O
     "read_lightfield": "io",
     "write_lightfield": "io",
+    "read_lightfield_with_metadata": "io",
+    "detect_layout": "io",
     # non-blind deconvolution and the paper's analytic special cases
     "deconvolve": "deconvolution",
     "iter_deconvolve": "deconvolution",
