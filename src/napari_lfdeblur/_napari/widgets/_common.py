@@ -57,6 +57,7 @@ __all__ = [
     "LossPlot",
     "ProgressPanel",
     "EpiPanel",
+    "EpiWidget",
     "SolverWidget",
     "notify_error",
     "notify_info",
@@ -717,3 +718,15 @@ class SolverWidget(QWidget):
             self._cancelled = True
             self.worker.quit()
         super().closeEvent(event)
+
+
+class EpiWidget(QWidget):
+    """Dock widget: the EPI panel on its own, for any light-field layer."""
+
+    def __init__(self, napari_viewer, parent=None):
+        super().__init__(parent)
+        self.viewer = napari_viewer
+        self.epi = EpiPanel(napari_viewer)
+        lay = QVBoxLayout(self)
+        lay.addWidget(self.epi)
+        lay.addStretch(1)

@@ -1,0 +1,229 @@
+"""The *Blind deblur* dock widget: estimate the camera path and the sharp light field.
+
+A thin shell over :func:`napari_lfdeblur.blind.iter_blind_deblur`, run in a
+napari ``thread_worker``. While it runs:
+
+- a progress bar with the time left (extrapolated from the fraction done);
+- a live preview: the layer ``'<source> blind (preview)'`` shows the
+  current light-field estimate whenever the solver sends one, and the path
+  plot shows the current path (with the true path, dashed, when the input
+  layer's metadata holds one, e.g. after *Simulate blur*);
+- the loss curve.
+
+Cancel stops the solver at its next progress report (well under a second
+per iteration on small light fields), removes the preview layer and adds
+nothing. When it finishes, the preview is replaced by
+``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
+timings, package version) and ``'<source> estimated path'``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from qtpy.QtWidgets import QComboBox, QGroupBox, QLabel, QVBoxLayout
+
+from ...path import validate_control_points
+from ..layers import (
+    LayerError,
+    add_layer,
+    control_points_from_layer,
+    lightfield_layer_data,
+    lightfield_metadata,
+    path_layer_data,
+    remove_layer,
+)
+from ._common import (
+    EpiPanel,
+    LayerComboBox,
+    LossPlot,
+    PathPlot,
+    SolverWidget,
+    device_combo,
+    dspin,
+    has_path,
+    spin,
+)
+
+__all__ = ["BlindDeblurWidget"]
+
+#: seconds between redraws of the plots during a run
+REDRAW_INTERVAL = 0.3
+
+# field names that BlindParams may use for the widget's controls
+_POINTS_FIELDS = ("n_control_points", "n_points", "control_points_count")
+_ITER_FIELDS = ("n_iter", "n_iterations", "iterations", "n_outer")
+_PREVIEW_FIELDS = ("preview_every",)
+
+
+def _presets() -> list[str]:
+    from ... import blind
+
+    for name in ("PRESETS", "BLIND_PRESETS"):
+        value = getattr(blind, name, None)
+        if value:
+            return list(value)
+    names = getattr(blind.BlindParams, "preset_names", None)
+    if callable(names):
+        return list(names())
+    return ["default"]
+
+
+def _make_params(preset: str, **values):
+    """``BlindParams`` of a preset, with the widget's values on fields that exist."""
+    from ...blind import BlindParams
+
+    make = getattr(BlindParams, "preset", None)
+    params = make(preset) if callable(make) else BlindParams()
+    names = {f.name for f in dataclasses.fields(params)}
+    changes = {}
+    for candidates, value in (
+        (_POINTS_FIELDS, values.get("n_points")),
+        (_ITER_FIELDS, values.get("n_iter")),
+        (_PREVIEW_FIELDS, values.get("preview_every")),
+    ):
+        if value is None:
+            continue
+        for key in candidates:
+            if key in names:
+                changes[key] = value
+                break
+    return dataclasses.replace(params, **changes) if changes else params
+
+
+class BlindDeblurWidget(SolverWidget):
+    """Dock widget: blind motion deblurring of a light-field layer."""
+
+    title = "Blind deblur"
+
+    def __init__(self, napari_viewer, parent=None):
+        super().__init__(napari_viewer, parent)
+        self.preset_combo = QComboBox()
+        self.preset_combo.addItems(_presets())
+        self.preset_combo.setToolTip("solver parameter preset (BlindParams.preset)")
+        self.points_spin = spin(3, 2, 12, "control points of the estimated Bezier path")
+        self.iter_spin = spin(30, 1, 100000, "iterations (see BlindParams)")
+        self.device_combo = device_combo()
+        self.seed_spin = spin(0, 0, 2**31 - 1, "random seed of the initial path")
+        self.d_inf_spin = dspin(0.0, -20.0, 20.0, 0.1, 3, "infinity disparity d_inf, px/view")
+        self.preview_spin = spin(5, 0, 1000, "send a preview every N iterations (0: none)")
+        self.true_combo = LayerComboBox(napari_viewer, predicate=has_path, allow_none=True)
+        self.true_combo.setToolTip("a layer holding the true path, to plot for comparison (optional)")
+        self.form.addRow("preset", self.preset_combo)
+        self.form.addRow("control points", self.points_spin)
+        self.form.addRow("iterations", self.iter_spin)
+        self.form.addRow("device", self.device_combo)
+        self.form.addRow("seed", self.seed_spin)
+        self.form.addRow("infinity disparity", self.d_inf_spin)
+        self.form.addRow("preview every", self.preview_spin)
+        self.form.addRow("true path (optional)", self.true_combo)
+
+        plots = QGroupBox("Path and loss")
+        g = QVBoxLayout(plots)
+        self.plot = PathPlot()
+        self.loss_plot = LossPlot()
+        g.addWidget(QLabel("camera path (solid: estimate, dashed: true)"))
+        g.addWidget(self.plot)
+        g.addWidget(self.loss_plot)
+        self.after_layout.addWidget(plots)
+        self.epi = EpiPanel(napari_viewer)
+        self.after_layout.addWidget(self.epi)
+
+        self.layer_combo.currentTextChanged.connect(self._input_changed)
+        self._input_changed()
+        self._last_draw = 0.0
+        self.preview_updates = 0
+
+    def _input_changed(self, *_):
+        layer = self.layer_combo.current_layer()
+        if layer is not None and has_path(layer):
+            self.true_combo.set_layer(layer)
+            if "infinity_disparity" in layer.metadata:
+                self.d_inf_spin.setValue(float(layer.metadata["infinity_disparity"]))
+
+    def true_path(self):
+        """The chosen true path, or None."""
+        layer = self.true_combo.current_layer()
+        if layer is None:
+            return None
+        try:
+            return control_points_from_layer(layer)
+        except LayerError:
+            return None
+
+    def preview_name(self) -> str:
+        return f"{self._job['source']} blind (preview)" if getattr(self, "_job", None) else ""
+
+    # ------------------------------------------------------------- job
+    def make_job(self, layer, lf):
+        from ...blind import iter_blind_deblur
+
+        params = _make_params(
+            self.preset_combo.currentText(),
+            n_points=self.points_spin.value(),
+            n_iter=self.iter_spin.value(),
+            preview_every=self.preview_spin.value(),
+        )
+        device = self.device_combo.currentText()
+        d_inf = self.d_inf_spin.value()
+        seed = self.seed_spin.value()
+        gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=device, seed=seed)
+        self._job = {
+            "source": layer.name,
+            "shape": lf.shape,
+            "true": self.true_path(),
+            "settings": {"preset": self.preset_combo.currentText(), "device": device,
+                         "seed": seed, "infinity_disparity": d_inf},
+        }
+        self.loss_plot.plot([])
+        self.plot.plot(None, self._job["true"])
+        self._last_draw = 0.0
+        self.preview_updates = 0
+        return lambda: gen
+
+    def on_progress(self, progress) -> None:
+        if np.isfinite(progress.loss):
+            self.loss_plot.append(progress.loss)
+        if progress.preview is not None:
+            data = lightfield_layer_data(progress.preview, name=self.preview_name(),
+                                         metadata=lightfield_metadata(kind="preview"), opacity=1.0)
+            add_layer(self.viewer, data)
+            self.preview_updates += 1
+        now = time.perf_counter()
+        if now - self._last_draw > REDRAW_INTERVAL or progress.preview is not None:
+            self._last_draw = now
+            self.loss_plot.plot(self.loss_plot.values)
+            if progress.control_points is not None:
+                self.plot.plot(progress.control_points, self._job["true"])
+
+    def cleanup(self) -> None:
+        if getattr(self, "_job", None):
+            remove_layer(self.viewer, self.preview_name())
+
+    def on_result(self, result) -> None:
+        job = self._job
+        cp = validate_control_points(result.control_points)
+        params = result.params.to_dict() if hasattr(result.params, "to_dict") else dict(result.params)
+        n_times = int(params.get("n_times", 32))
+        name = f"{job['source']} deblurred (blind)"
+        meta = lightfield_metadata(
+            kind="blind",
+            parameters={**params, **job["settings"], "operation": "blind_deblur"},
+            control_points=cp,
+            n_times=n_times,
+            infinity_disparity=job["settings"]["infinity_disparity"],
+            source_layer=job["source"],
+            loss_history=[float(v) for v in getattr(result, "loss_history", [])],
+            timings=dict(getattr(result, "timings", {}) or {}),
+        )
+        out = add_layer(self.viewer, lightfield_layer_data(result.lightfield, name=name, metadata=meta))
+        path = add_layer(self.viewer, path_layer_data(
+            cp, job["shape"], n_times=n_times, name=f"{job['source']} estimated path",
+            true_control_points=job["true"]))
+        self.last_layers = [out, path]
+        self.plot.plot(cp, job["true"], n_times=max(64, n_times))
+        if meta["loss_history"]:
+            self.loss_plot.plot(meta["loss_history"])
+        self.epi.layer_combo.set_layer(out)
