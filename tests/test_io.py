@@ -630,3 +630,17 @@ def test_metadata_is_json_serialisable(tmp_path, lf_rgb):
     _, meta = read_lightfield_with_metadata(tmp_path / "a.h5")
     assert json.loads(json.dumps(meta))["source"].endswith("a.h5")
     assert meta["layout"] == "h5" and meta["shape"] == list(lf_rgb.shape)
+
+
+def test_photo_folder_is_not_a_light_field(tmp_path, lf_gray):
+    # names with two numbers that do not index a view grid (date_time) are not views
+    folder = _write_views(tmp_path / "phone", _u8(lf_gray), lambda r, c: f"IMG_2023050{r + 1}_12000{c}", ".jpg")
+    assert probe_layout(folder) is None
+    with pytest.raises(LightFieldFormatError, match="no light-field views"):
+        read_lightfield(folder)
+
+
+def test_mat_float_overshoot_is_clipped(tmp_path, lf_gray):
+    arr = lf_gray * 1.1 - 0.05
+    scipy.io.savemat(tmp_path / "f.mat", {"LF": arr})
+    np.testing.assert_allclose(read_lightfield(tmp_path / "f.mat"), np.clip(arr, 0, 1), atol=1e-7)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import uuid
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -214,7 +215,7 @@ def validate_lightfield(lf, path="light field") -> np.ndarray:
 
 
 def _tmp_name(path: Path, suffix: str = "") -> Path:
-    return path.with_name(f".{path.name}.tmp{os.getpid()}{suffix}")
+    return path.with_name(f".{path.name}.tmp{os.getpid()}-{uuid.uuid4().hex[:8]}{suffix}")
 
 
 def check_writable(path: Path, overwrite: bool) -> None:

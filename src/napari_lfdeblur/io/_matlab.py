@@ -122,6 +122,10 @@ def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_byt
         meta["dropped_weight_channel"] = True
     meta["file_dtype"] = str(raw.dtype)
     raw = validate_lightfield(raw, path)
+    if value_range is None and np.issubdtype(raw.dtype, np.floating):
+        # the toolbox's float light fields are nominally in [0, 1]; colour
+        # correction can overshoot a little, so clip instead of refusing
+        value_range = (0.0, 1.0)
     return to_float01(np.ascontiguousarray(raw), path, value_range=value_range), meta
 
 

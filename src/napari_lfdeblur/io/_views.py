@@ -62,9 +62,23 @@ def probe_scheme(folder) -> str | None:
         "rc": sum(bool(_RC.match(n)) for n in names),
     }
     for scheme in ("hci", "stanford", "rc"):  # most specific first
-        if counts[scheme] >= 2 and counts[scheme] >= len(names) / 2:
+        if counts[scheme] >= 2 and counts[scheme] >= len(names) / 2 and _plausible_grid(names, scheme):
             return scheme
     return None
+
+
+def _plausible_grid(names, scheme) -> bool:
+    """True when the indices in the names span a grid not much larger than the
+    number of files (a few missing views are allowed, so that reading them
+    reports what is missing; names like IMG_20230501_120000.jpg are not views)."""
+    if scheme == "hci":
+        idx = [int(m.group(1)) for m in map(_HCI.match, names) if m]
+        return max(idx) + 1 <= 4 * len(idx)
+    rx = _STANFORD if scheme == "stanford" else _RC
+    rc = [(int(m.group(1)), int(m.group(2))) for m in map(rx.match, names) if m]
+    rows = max(r for r, _ in rc) + 1
+    cols = max(c for _, c in rc) + 1
+    return rows * cols <= 4 * len(rc)
 
 
 def _parse_cfg(path: Path) -> dict:
