@@ -74,7 +74,7 @@ def test_simulate_adds_blurred_and_path_layers(make_napari_viewer, qtbot, lf, no
     np.testing.assert_allclose(blurred.data, expected, atol=1e-6)
     assert blurred.axis_labels == ("v", "u", "y", "x")
     meta = blurred.metadata
-    assert meta["lfdeblur_version"] == napari_lfdeblur.__version__
+    assert meta["napari_lfdeblur_version"] == napari_lfdeblur.__version__
     np.testing.assert_allclose(meta["control_points"], cp)
     assert meta["n_times"] == 8 and meta["infinity_disparity"] == 0.5
     assert meta["source_layer"] == "sharp"
@@ -187,7 +187,7 @@ def test_deconvolve_takes_path_from_metadata(make_napari_viewer, qtbot, lf, noti
     np.testing.assert_allclose(out.data, lf, atol=2e-3)
     np.testing.assert_allclose(out.data, deconvolve(blurred, cp, n_times=8, method="inplane", weight=0.0), atol=1e-6)
     assert out.metadata["parameters"]["method"] == "inplane"
-    assert out.metadata["lfdeblur_version"] == napari_lfdeblur.__version__
+    assert out.metadata["napari_lfdeblur_version"] == napari_lfdeblur.__version__
     np.testing.assert_allclose(out.metadata["control_points"], cp)
     np.testing.assert_array_equal(layer.data, blurred)
 

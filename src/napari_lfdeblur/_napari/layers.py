@@ -12,7 +12,7 @@ Light field
     ``rgb=True`` for colour (C = 3 or 4), ``axis_labels=('v', 'u', 'y', 'x')``.
     The view sliders are the two leading axes. ``metadata`` holds::
 
-        'lfdeblur_version'    the package version that made it
+        'napari_lfdeblur_version'    the package version that made it
         'kind'                'blurred', 'deconvolved', 'blind', 'preview', ...
         'parameters'          dict of the parameters of the operation
         'control_points'      list of [p_x, p_y, p_z] (the path used / found)
@@ -141,10 +141,10 @@ def lightfield_metadata(
     """The ``metadata`` dict of a light-field layer made by this plugin.
 
     ``control_points`` is stored as a list of ``[p_x, p_y, p_z]`` lists (JSON
-    friendly); the package version goes in ``'lfdeblur_version'``.
+    friendly); the package version goes in ``'napari_lfdeblur_version'``.
     """
     meta: dict[str, Any] = {
-        "lfdeblur_version": napari_lfdeblur.__version__,
+        "napari_lfdeblur_version": napari_lfdeblur.__version__,
         "kind": kind,
         "parameters": dict(parameters or {}),
     }
@@ -275,13 +275,14 @@ def path_layer_data(
         kinds.append("true path")
     line = _path_polyline(cp, (V, U, Y, X), n_times, s)
     r = max(0.5, s * 0.15)
-    start = np.array([line[0] - r, line[0] + r])
+    # an ellipse given by the 4 corners of its bounding box (2 rows would mean centre and radii)
+    start = line[0] + r * np.array([[-1.0, -1.0], [-1.0, 1.0], [1.0, 1.0], [1.0, -1.0]])
     shapes += [line, start]
     types += ["path", "ellipse"]
     edge += ["yellow", "yellow"]
     kinds += ["path", "start (t = 0)"]
     meta = {
-        "lfdeblur_version": napari_lfdeblur.__version__,
+        "napari_lfdeblur_version": napari_lfdeblur.__version__,
         "kind": "path",
         "control_points": cp.tolist(),
         "n_times": int(n_times),
@@ -349,7 +350,7 @@ def epi_layer_data(lf, which: str, *, name: str, v=None, u=None, y=None, x=None,
     else:
         raise ValueError(f"which must be 'h' or 'v'; got {which!r}")
     data = np.ascontiguousarray(data)
-    meta = {"lfdeblur_version": napari_lfdeblur.__version__, "kind": f"epi-{which}", **pick}
+    meta = {"napari_lfdeblur_version": napari_lfdeblur.__version__, "kind": f"epi-{which}", **pick}
     meta.update(metadata or {})
     kw = {"name": name, "rgb": rgb, "metadata": meta, **place}
     if not rgb:

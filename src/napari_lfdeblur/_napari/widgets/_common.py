@@ -145,15 +145,14 @@ class LayerComboBox(QComboBox):
         self.blockSignals(True)
         self.clear()
         self.addItems(names)
-        self.blockSignals(False)
         if current in names:
             self.setCurrentText(current)
         elif names:
-            # a new layer: select the newest usable one
-            self.setCurrentIndex(len(names) - 1)
+            # the chosen layer is gone (or none was chosen): take the newest usable one
+            self.setCurrentIndex(0 if self._allow_none else len(names) - 1)
+        self.blockSignals(False)
+        if self.currentText() != current:
             self.currentTextChanged.emit(self.currentText())
-        else:
-            self.currentTextChanged.emit("")
 
     def showPopup(self):
         self.refresh()
@@ -218,6 +217,7 @@ class PathTable(QWidget):
         self.table.setRowCount(cp.shape[0])
         for i, row in enumerate(cp):
             for j, value in enumerate(row):
+                value = 0.0 if abs(value) < 1e-9 else float(value)  # no '-0' or '1e-17'
                 self.table.setItem(i, j, QTableWidgetItem(f"{value:.6g}"))
         self.table.blockSignals(False)
         self.changed.emit()
@@ -652,6 +652,7 @@ class SolverWidget(QWidget):
             return None
         self._cancelled = False
         self.last_result = None
+        self.last_layers = []
         self.progress.start(f"{self.title}: starting...")
         worker = thread_worker(_guarded, start_thread=False)(job)
         worker.yielded.connect(self._on_yielded)
@@ -663,6 +664,34 @@ class SolverWidget(QWidget):
         self.cancel_button.setEnabled(True)
         worker.start()
         return worker
+
+    def run_and_wait(self, timeout: float | None = None) -> list:
+        """Run and wait for the end, processing Qt events (for scripts and tests).
+
+        Parameters
+        ----------
+        timeout : float, optional
+            Seconds after which the run is cancelled.
+
+        Returns
+        -------
+        list of layers
+            The layers the run added; empty when it failed or was cancelled
+            (a notification says why).
+        """
+        from qtpy.QtWidgets import QApplication
+
+        self.last_layers = []
+        if self.run() is None:
+            return []
+        t0 = time.perf_counter()
+        while self.is_running:
+            QApplication.processEvents()
+            time.sleep(0.005)
+            if timeout is not None and time.perf_counter() - t0 > timeout and not self._cancelled:
+                self.cancel()
+        QApplication.processEvents()
+        return list(self.last_layers)
 
     def cancel(self, *_):
         """Ask the worker to stop at its next progress report; no result layer is added."""
