@@ -594,8 +594,8 @@ def test_bad_too_big_views_checked_before_decoding(views8, monkeypatch):
 
 def test_bad_options_and_types(tmp_path, lf_gray):
     np.save(tmp_path / "a.npy", lf_gray)
-    with pytest.raises(TypeError, match="grid"):
-        read_lightfield(tmp_path / "a.npy", grid=(2, 2))
+    with pytest.raises(TypeError, match="angular_size"):
+        read_lightfield(tmp_path / "a.npy", angular_size=14)
     with pytest.raises(ValueError, match="unknown layout"):
         read_lightfield(tmp_path / "a.npy", layout="lytro-raw")
     (tmp_path / "a.xyz").write_text("?")
@@ -671,3 +671,15 @@ def test_png16_decoder_mixed_row_filters_matches_reference(tmp_path):
             + chunk(b"IDAT", zlib.compress(b"".join(rows))) + chunk(b"IEND", b""))
     (tmp_path / "m.png").write_bytes(blob)
     np.testing.assert_array_equal(_png.read_png16(tmp_path / "m.png"), img)
+
+
+def test_stack_of_views_with_grid_option(tmp_path, lf_rgb):
+    tifffile.imwrite(tmp_path / "stack.tif", _u8(lf_rgb).reshape(V * U, Y, X, 3), photometric="rgb")
+    with pytest.raises(LightFieldFormatError, match="stack of 12 colour images"):
+        read_lightfield(tmp_path / "stack.tif")
+    out = read_lightfield(tmp_path / "stack.tif", grid=(V, U))
+    np.testing.assert_array_equal(out, _u8(lf_rgb) / np.float32(255))
+    np.save(tmp_path / "g.npy", lf_rgb[..., 0].reshape(V * U, Y, X))
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "g.npy", grid=(V, U)), lf_rgb[..., 0])
+    with pytest.raises(LightFieldFormatError, match="needs a stack of 9 views"):
+        read_lightfield(tmp_path / "g.npy", grid=(3, 3))

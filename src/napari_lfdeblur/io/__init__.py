@@ -77,10 +77,10 @@ _OPTIONS = {
     "eslf": ("angular_size", "angular_crop"),
     "mosaic": ("grid",),
     "mat": ("variable", "drop_weight"),
-    "h5": ("dataset", "axes"),
-    "npy": ("axes",),
-    "npz": ("key", "axes"),
-    "tiff": ("axes",),
+    "h5": ("dataset", "axes", "grid"),
+    "npy": ("axes", "grid"),
+    "npz": ("key", "axes", "grid"),
+    "tiff": ("axes", "grid"),
 }
 
 
@@ -282,7 +282,9 @@ def read_lightfield(path, *, layout: str | None = None, value_range=None, max_by
         - ``mat``: ``variable`` (default ``'LF'``), ``drop_weight`` (default True);
         - ``h5``: ``dataset``, ``axes`` (e.g. ``'vuyxc'``; default from the
           dataset's ``axes`` attribute, else v, u, y, x, c);
-        - ``npz``: ``key``, ``axes``; ``npy``, ``tiff``: ``axes``.
+        - ``npz``: ``key``, ``axes``; ``npy``, ``tiff``: ``axes``;
+        - arrays (``h5``, ``npy``, ``npz``, ``tiff``): ``grid=(V, U)`` reads a
+          3D/4D stack of ``V*U`` views ``(V*U, Y, X[, C])``, row-major.
 
     Returns
     -------

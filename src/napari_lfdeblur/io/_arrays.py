@@ -45,8 +45,12 @@ def parse_axes(axes, ndim, path) -> tuple[int, ...] | None:
     return tuple(names.index(a) for a in want)
 
 
-def _finish(raw, path, meta, axes, value_range):
+def _finish(raw, path, meta, axes, value_range, grid=None):
     raw = np.asarray(raw)
+    if grid is not None:  # a stack of V*U views, row-major
+        V, U = (int(g) for g in grid)
+        raw = raw.reshape((V, U) + raw.shape[1:])
+        meta["grid"] = [V, U]
     perm = parse_axes(axes, raw.ndim, path)
     if perm is not None:
         raw = np.transpose(raw, perm)
@@ -56,13 +60,24 @@ def _finish(raw, path, meta, axes, value_range):
     return to_float01(np.ascontiguousarray(raw), path, value_range=value_range), meta
 
 
-def _shape_error(shape, path, what="the array"):
-    """Raise on a shape that cannot be a light field (without loading data)."""
+def _shape_error(shape, path, what="the array", grid=None):
+    """Raise on a shape that cannot be a light field (without loading data).
+
+    With ``grid=(V, U)`` a 3D/4D stack of ``V*U`` views is accepted."""
+    if grid is not None:
+        V, U = (int(g) for g in grid)
+        if len(shape) not in (3, 4) or shape[0] != V * U:
+            raise LightFieldFormatError(
+                f"{path}: grid={tuple(grid)} needs a stack of {V * U} views, shape ({V * U}, Y, X[, C]); "
+                f"{what} has shape {tuple(shape)}"
+            )
+        return
     if len(shape) in (2, 3):
         raise LightFieldFormatError(
             f"{path}: {what} is {len(shape)}D, shape {tuple(shape)}; a light field is 4D (V, U, Y, X) or "
             f"5D (V, U, Y, X, C). A single image or a stack of views is not enough: arrange the views "
-            f"on a (V, U) grid"
+            f"on a (V, U) grid (for a stack of views pass grid=(V, U); for a mosaic image pass "
+            f"layout='eslf' or layout='mosaic')"
         )
     if len(shape) not in (4, 5):
         raise LightFieldFormatError(
@@ -84,19 +99,19 @@ def npy_header(path) -> tuple[tuple[int, ...], np.dtype]:
     return tuple(shape), np.dtype(dtype)
 
 
-def read_npy(path, *, axes=None, value_range=None, max_bytes=None):
+def read_npy(path, *, axes=None, grid=None, value_range=None, max_bytes=None):
     path = Path(path)
     try:
         shape, dtype = npy_header(path)
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: not a readable .npy file ({type(exc).__name__}: {exc})") from None
-    _shape_error(shape, path)
+    _shape_error(shape, path, grid=grid)
     check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
     try:
         raw = np.load(path, allow_pickle=False)
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: cannot read the data, the file may be truncated ({exc})") from None
-    return _finish(raw, path, {"layout": "npy"}, axes, value_range)
+    return _finish(raw, path, {"layout": "npy"}, axes, value_range, grid)
 
 
 def _npz_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
@@ -131,7 +146,7 @@ def npz_lightfield_key(path, headers=None) -> str | None:
     return None
 
 
-def read_npz(path, *, key=None, axes=None, value_range=None, max_bytes=None):
+def read_npz(path, *, key=None, axes=None, grid=None, value_range=None, max_bytes=None):
     path = Path(path)
     try:
         headers = _npz_headers(path)
@@ -146,7 +161,7 @@ def read_npz(path, *, key=None, axes=None, value_range=None, max_bytes=None):
     elif key not in headers:
         raise LightFieldFormatError(f"{path}: no array {key!r} (found {sorted(headers)})")
     shape, dtype = headers[key]
-    _shape_error(shape, path, f"array {key!r}")
+    _shape_error(shape, path, f"array {key!r}", grid)
     check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
     meta: dict = {"layout": "npz", "key": key}
     try:
@@ -159,7 +174,7 @@ def read_npz(path, *, key=None, axes=None, value_range=None, max_bytes=None):
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: cannot read array {key!r} ({type(exc).__name__}: {exc})") from None
     meta["layout"] = "npz"
-    return _finish(raw, path, meta, axes, value_range)
+    return _finish(raw, path, meta, axes, value_range, grid)
 
 
 def _load_json_meta(value) -> dict:
@@ -187,10 +202,11 @@ def tiff_shape(path) -> tuple[tuple[int, ...], np.dtype, dict]:
         meta = {}
         if tif.shaped_metadata:
             meta = dict(tif.shaped_metadata[0])
+        meta["_series_axes"] = s.axes
         return tuple(s.shape), np.dtype(s.dtype), meta
 
 
-def read_tiff(path, *, axes=None, value_range=None, max_bytes=None):
+def read_tiff(path, *, axes=None, grid=None, value_range=None, max_bytes=None):
     import tifffile
 
     path = Path(path)
@@ -203,7 +219,12 @@ def read_tiff(path, *, axes=None, value_range=None, max_bytes=None):
         axes = tmeta["lfdeblur_axes"]
     if len(shape) == 6 and shape[-1] == 1:
         shape = shape[:-1]
-    _shape_error(shape, path, "the TIFF image series")
+    if grid is None and len(shape) == 4 and tmeta.get("_series_axes", "").endswith("S"):
+        raise LightFieldFormatError(
+            f"{path}: the TIFF is a stack of {shape[0]} colour images of {shape[1]}x{shape[2]}, shape "
+            f"{tuple(shape)}; pass grid=(V, U) to arrange them as a V x U light field"
+        )
+    _shape_error(shape, path, "the TIFF image series", grid)
     check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
     try:
         raw = tifffile.imread(path)
@@ -212,7 +233,7 @@ def read_tiff(path, *, axes=None, value_range=None, max_bytes=None):
     raw = raw.reshape(shape)
     if METADATA_KEY in tmeta:
         meta.update(_load_json_meta(tmeta[METADATA_KEY]))
-    return _finish(raw, path, meta, axes, value_range)
+    return _finish(raw, path, meta, axes, value_range, grid)
 
 
 # ------------------------------------------------------------------ HDF5
@@ -254,7 +275,7 @@ def h5_lightfield_name(f) -> str | None:
     return found[0] if len(found) == 1 else None
 
 
-def read_h5(path, *, dataset=None, axes=None, value_range=None, max_bytes=None):
+def read_h5(path, *, dataset=None, axes=None, grid=None, value_range=None, max_bytes=None):
     import h5py
 
     path = Path(path)
@@ -270,7 +291,7 @@ def read_h5(path, *, dataset=None, axes=None, value_range=None, max_bytes=None):
             what = f"no dataset {dataset!r}" if dataset else "no dataset 'LF' and not exactly one 4D/5D dataset"
             raise LightFieldFormatError(f"{path}: {what} (found {datasets[:10]}); pass dataset=")
         ds = f[name]
-        _shape_error(ds.shape, path, f"dataset {name!r}")
+        _shape_error(ds.shape, path, f"dataset {name!r}", grid)
         check_memory(ds.shape, ds.dtype.itemsize, path, max_bytes=max_bytes)
         if axes is None:
             for attr in ("axes", "axis_order", "dims", "dimension_order", "lfdeblur_axes"):
@@ -295,4 +316,4 @@ def read_h5(path, *, dataset=None, axes=None, value_range=None, max_bytes=None):
             if METADATA_KEY in holder:
                 meta.update(_load_json_meta(holder[METADATA_KEY]))
                 break
-    return _finish(raw, path, meta, axes, value_range)
+    return _finish(raw, path, meta, axes, value_range, grid)
