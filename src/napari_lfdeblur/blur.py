@@ -11,18 +11,23 @@ bilinear interpolation and replicated boundaries.
 
 Implementation
 --------------
-With ``d_inf = 0`` one instant is separable: for the pixel ``(y, x)`` it maps
-the ``V x U`` matrix of angular samples ``L(y, x)`` to ``B_k(y) L(y, x)
-A_k(x)^T``, where ``A_k(x)`` (``U x U``) and ``B_k(y)`` (``V x V``) are clamped
-bilinear interpolation matrices with two non-zeros per row. The forward is a
-pair of batched small-matrix products, done in blocks of rows so that the
-temporary memory stays bounded (no ``T``-fold copy of the light field). A
-custom autograd function recomputes those blocks in the backward pass, so
-gradients with respect to both the light field and the path cost no stored
-intermediates either.
+With ``d_inf = 0`` the sample ``v + s_v`` splits into an integer offset and a
+bilinear fraction, and so does ``u + s_u``. Summed over the exposure, every
+pixel therefore sees a small 2D kernel over integer view offsets, the
+bilinear histogram of the angular shifts it goes through (see
+:func:`tap_kernel`)::
 
-With ``d_inf != 0`` each instant also resamples ``y`` and ``x`` (two taps each,
-gathered along whole rows and columns) before the angular step.
+    f[a, b, y, x] = sum_(i, j) K[y, x, i, j] l[clamp(a + ov + i), clamp(b + ou + j), y, x]
+
+``K`` is an outer product of per-row and per-column splats summed over the
+instants, cheap to build and differentiable in the path. Applying it costs
+one multiply-add pass per offset the path visits, over blocks of rows small
+enough to stay in cache, with no ``T``-fold copy of the light field. A
+custom autograd function recomputes the blocks in the backward pass, so
+gradients for both the light field and the path store no intermediates.
+
+With ``d_inf != 0`` each instant also resamples ``y`` and ``x`` (two taps
+each, gathered along whole rows and columns) before its angular kernel.
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ __all__ = [
 ]
 
 #: elements of temporary memory one block may use (float32: 4 bytes each)
-DEFAULT_BLOCK_ELEMENTS = 1 << 22
+DEFAULT_BLOCK_ELEMENTS = 1 << 19
 
 
 # ----------------------------------------------------------------- arrays
@@ -156,69 +161,148 @@ def interpolation_matrices(positions: torch.Tensor, shape):
     return _interp_matrices(s_u, U), _interp_matrices(s_v, V), s_u, s_v
 
 
-# ------------------------------------------------ separable angular blur
+# --------------------------------------------- angular blur as offset taps
 
 
-def _rows_per_block(T: int, V: int, U: int, Y: int, X: int, C: int, budget: int) -> int:
-    return int(max(1, min(Y, budget // max(1, T * V * U * X * C))))
+def _splat(shift: torch.Tensor, size: int):
+    """Bilinear splat of angular shifts onto integer offsets.
+
+    ``shift`` has shape ``(T, n)``. The sample ``a + shift`` of an axis of
+    ``size`` views is ``(1 - f) l[a + o] + f l[a + o + 1]`` with ``o =
+    floor(shift)`` and ``f`` its fraction, the indices clamped to the axis.
+    Shifts beyond ``+-(size - 1)`` read only the edge view, so they are
+    clamped there first, which bounds the number of offsets.
+
+    Returns
+    -------
+    h : torch.Tensor, shape (T, n, D)
+        Weight of each offset ``o_min + d``, differentiable in ``shift``.
+    o_min : int
+    """
+    if size == 1:
+        return torch.ones(shift.shape + (1,), dtype=shift.dtype, device=shift.device), 0
+    lim = size - 1.0
+    sc = shift.clamp(-lim, lim)
+    o = torch.floor(sc.detach()).clamp_(-lim, lim - 1).long()
+    f = sc - o.to(sc.dtype)
+    o_min = int(o.min())
+    D = int(o.max()) + 2 - o_min
+    cols = torch.arange(D, device=shift.device)
+    rel = (o - o_min)[..., None]
+    h = (1.0 - f)[..., None] * (rel == cols).to(shift.dtype) + f[..., None] * (rel + 1 == cols).to(shift.dtype)
+    return h, o_min
 
 
-def _angular_apply(L, A, B, out, rows, transpose=False):
-    """``out[..., rows, :, :] = mean_k B_k L A_k^T`` (or the adjoint) on a row block."""
-    Lb = L[:, :, rows]
-    Bb = B[:, rows]
-    T = A.shape[0]
-    if not transpose:
-        # tmp[k, v, b, y, x, c] = sum_u A[k, x, b, u] L[v, u, y, x, c]
-        tmp = torch.einsum("kxbu,vuyxc->kvbyxc", A, Lb)
-        res = torch.einsum("kyav,kvbyxc->abyxc", Bb, tmp)
-    else:
-        tmp = torch.einsum("kyav,abyxc->kvbyxc", Bb, Lb)
-        res = torch.einsum("kxbu,kvbyxc->vuyxc", A, tmp)
-    out[:, :, rows] = res / T
+def tap_kernel(s_u: torch.Tensor, s_v: torch.Tensor, U: int, V: int):
+    """The per-pixel angular kernel of a set of instants, over integer view offsets.
+
+    With ``d_inf = 0`` the blurred light field is, at every pixel,
+
+        f[a, b] = sum_(i, j) K[y, x, i, j] l[clamp(a + ov + i), clamp(b + ou + j)]
+
+    where ``K[y, x] = mean_k hv_k(y) (x) hu_k(x)`` is the bilinear histogram
+    of the angular shifts the pixel sees during the exposure.
+
+    Parameters
+    ----------
+    s_u : torch.Tensor, shape (T, X)
+    s_v : torch.Tensor, shape (T, Y)
+
+    Returns
+    -------
+    K : torch.Tensor, shape (Y, X, Dv, Du)
+    ov, ou : int
+        The offsets of ``K[..., 0, 0]``.
+    """
+    hu, ou = _splat(s_u, U)
+    hv, ov = _splat(s_v, V)
+    K = torch.einsum("kyd,kxe->yxde", hv, hu) / s_u.shape[0]
+    return K, ov, ou
 
 
-def _angular(L, A, B, transpose=False, block_elements=DEFAULT_BLOCK_ELEMENTS):
-    V, U, Y, X, C = L.shape
-    out = torch.empty_like(L)
-    step = _rows_per_block(A.shape[0], V, U, Y, X, C, block_elements)
-    for y0 in range(0, Y, step):
-        _angular_apply(L, A, B, out, slice(y0, min(Y, y0 + step)), transpose)
-    return out
+def _rows_per_block(n_per_row: int, budget: int, Y: int) -> int:
+    return int(max(1, min(Y, budget // max(1, n_per_row))))
 
 
-class _AngularBlur(torch.autograd.Function):
-    """``f = mean_k B_k(y) L(y, x) A_k(x)^T`` with recomputing, block-wise backward."""
+class _Taps:
+    """Block-wise application of a tap kernel and of its adjoint (no autograd)."""
+
+    def __init__(self, shape, K, ov, ou, block_elements):
+        V, U, Y, X, C = shape
+        self.shape = shape
+        self.K = K
+        Dv, Du = K.shape[2], K.shape[3]
+        dev = K.device
+        # replicate padding as index vectors: padded row i reads row iv[i]
+        self.iv = torch.arange(ov, ov + V + Dv - 1, device=dev).clamp_(0, V - 1)
+        self.iu = torch.arange(ou, ou + U + Du - 1, device=dev).clamp_(0, U - 1)
+        active = (K.detach().abs().amax(dim=(0, 1)) > 0).nonzero().tolist()
+        self.taps = [(int(i), int(j)) for i, j in active]
+        self.step = _rows_per_block((V + Dv - 1) * (U + Du - 1) * X * C, block_elements, Y)
+
+    def blocks(self):
+        Y = self.shape[2]
+        for y0 in range(0, Y, self.step):
+            yield slice(y0, min(Y, y0 + self.step))
+
+    def _pad(self, Lb):
+        return Lb.index_select(0, self.iv).index_select(1, self.iu)
+
+    def forward(self, L):
+        V, U = self.shape[:2]
+        out = torch.empty_like(L)
+        for rows in self.blocks():
+            Lp = self._pad(L[:, :, rows])
+            Kb = self.K[rows]
+            acc = torch.zeros_like(out[:, :, rows])
+            for i, j in self.taps:
+                acc.addcmul_(Lp[i : i + V, j : j + U], Kb[None, None, :, :, i, j, None])
+            out[:, :, rows] = acc
+        return out
+
+    def adjoint(self, G):
+        V, U = self.shape[:2]
+        out = torch.empty_like(G)
+        for rows in self.blocks():
+            Gb = G[:, :, rows]
+            Kb = self.K[rows]
+            gp = Gb.new_zeros((len(self.iv), len(self.iu)) + Gb.shape[2:])
+            for i, j in self.taps:
+                gp[i : i + V, j : j + U].addcmul_(Gb, Kb[None, None, :, :, i, j, None])
+            # adjoint of the replicate padding: add the padded views back onto the edges
+            gv = Gb.new_zeros((V, len(self.iu)) + Gb.shape[2:]).index_add_(0, self.iv, gp)
+            out[:, :, rows] = Gb.new_zeros(Gb.shape).index_add_(1, self.iu, gv)
+        return out
+
+    def kernel_gradient(self, L, G):
+        """d<G, forward(L)>/dK, shape of K."""
+        V, U = self.shape[:2]
+        gK = torch.zeros_like(self.K)
+        for rows in self.blocks():
+            Lp = self._pad(L[:, :, rows])
+            Gb = G[:, :, rows]
+            for i, j in self.taps:
+                gK[rows, :, i, j] = torch.einsum("abyxc,abyxc->yx", Gb, Lp[i : i + V, j : j + U])
+        return gK
+
+
+class _TapBlur(torch.autograd.Function):
+    """``f = taps(K) * L`` with gradients for the light field and the kernel, recomputed block-wise."""
 
     @staticmethod
-    def forward(ctx, L, A, B, block_elements):
-        ctx.save_for_backward(L, A, B)
-        ctx.block_elements = block_elements
-        return _angular(L, A, B, False, block_elements)
+    def forward(ctx, L, K, ov, ou, block_elements):
+        taps = _Taps(L.shape, K.detach(), ov, ou, block_elements)
+        ctx.save_for_backward(L)
+        ctx.taps = taps
+        return taps.forward(L)
 
     @staticmethod
     def backward(ctx, G):
-        L, A, B = ctx.saved_tensors
-        need_L, need_A, need_B = ctx.needs_input_grad[:3]
+        (L,) = ctx.saved_tensors
         G = G.contiguous()
-        gL = _angular(G, A, B, True, ctx.block_elements) if need_L else None
-        gA = torch.zeros_like(A) if need_A else None
-        gB = torch.zeros_like(B) if need_B else None
-        if need_A or need_B:
-            T = A.shape[0]
-            V, U, Y, X, C = L.shape
-            step = _rows_per_block(T, V, U, Y, X, C, ctx.block_elements)
-            for y0 in range(0, Y, step):
-                rows = slice(y0, min(Y, y0 + step))
-                Lb, Gb = L[:, :, rows], G[:, :, rows]
-                if need_A:
-                    # H[k, v, b, y, x, c] = sum_a B[k, y, a, v] G[a, b, y, x, c]
-                    H = torch.einsum("kyav,abyxc->kvbyxc", B[:, rows], Gb)
-                    gA += torch.einsum("kvbyxc,vuyxc->kxbu", H, Lb) / T
-                if need_B:
-                    tmp = torch.einsum("kxbu,vuyxc->kvbyxc", A, Lb)
-                    gB[:, rows] = torch.einsum("abyxc,kvbyxc->kyav", Gb, tmp) / T
-        return gL, gA, gB, None
+        gL = ctx.taps.adjoint(G) if ctx.needs_input_grad[0] else None
+        gK = ctx.taps.kernel_gradient(L, G) if ctx.needs_input_grad[1] else None
+        return gL, gK, None, None, None
 
 
 # ------------------------------------------------------ spatial resample
@@ -325,7 +409,21 @@ class BlurOperator:
             cp = torch.as_tensor(validate_control_points(control_points), dtype=dtype, device=self.device)
         self.control_points = cp
         self.positions = bezier_positions(cp, self.n_times)
-        self.A, self.B, self.s_u, self.s_v = interpolation_matrices(self.positions, self.shape)
+        V, U, Y, X = self.shape[:4]
+        r = max(X, Y) / 2.0
+        xt = normalized_coordinates(X, r, dtype, self.device)
+        yt = normalized_coordinates(Y, r, dtype, self.device)
+        #: angular shifts s_u (T, X) and s_v (T, Y) of every instant
+        self.s_u = self.positions[:, 0:1] - xt[None, :] * self.positions[:, 2:3]
+        self.s_v = self.positions[:, 1:2] - yt[None, :] * self.positions[:, 2:3]
+        if self.infinity_disparity == 0.0:
+            # one kernel for the whole exposure
+            self._kernels = [tap_kernel(self.s_u, self.s_v, U, V)]
+        else:
+            # the spatial resampling differs per instant: one kernel per instant
+            self._kernels = [
+                tap_kernel(self.s_u[k : k + 1], self.s_v[k : k + 1], U, V) for k in range(self.n_times)
+            ]
 
     def _check(self, t: torch.Tensor) -> torch.Tensor:
         if not isinstance(t, torch.Tensor):
@@ -338,24 +436,25 @@ class BlurOperator:
         """Blur ``lf`` (shape ``(V, U, Y, X, C)``); differentiable in ``lf`` and the path."""
         L = self._check(lf)
         if self.infinity_disparity == 0.0:
-            return _AngularBlur.apply(L, self.A, self.B, self.block_elements)
+            K, ov, ou = self._kernels[0]
+            return _TapBlur.apply(L, K, ov, ou, self.block_elements)
         out = torch.zeros_like(L)
-        for k in range(self.n_times):
+        for k, (K, ov, ou) in enumerate(self._kernels):
             Lk = _spatial_resample(L, self.s_u[k], self.s_v[k], self.infinity_disparity)
-            out = out + _AngularBlur.apply(Lk, self.A[k : k + 1], self.B[k : k + 1], self.block_elements)
+            out = out + _TapBlur.apply(Lk, K, ov, ou, self.block_elements)
         return out / self.n_times
 
     __call__ = forward
 
     def adjoint(self, y: torch.Tensor) -> torch.Tensor:
         """The adjoint (transpose) of :meth:`forward` in the light field, for a fixed path."""
-        G = self._check(y).contiguous()
-        A, B = self.A.detach(), self.B.detach()
+        G = self._check(y).detach().contiguous()
         if self.infinity_disparity == 0.0:
-            return _angular(G, A, B, True, self.block_elements)
+            K, ov, ou = self._kernels[0]
+            return _Taps(self.shape, K.detach(), ov, ou, self.block_elements).adjoint(G)
         out = torch.zeros_like(G)
-        for k in range(self.n_times):
-            Gk = _angular(G, A[k : k + 1], B[k : k + 1], True, self.block_elements)
+        for k, (K, ov, ou) in enumerate(self._kernels):
+            Gk = _Taps(self.shape, K.detach(), ov, ou, self.block_elements).adjoint(G)
             out += _spatial_resample_adjoint(
                 Gk, self.s_u[k].detach(), self.s_v[k].detach(), self.infinity_disparity
             )
