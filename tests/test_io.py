@@ -677,6 +677,7 @@ def test_stack_of_views_with_grid_option(tmp_path, lf_rgb):
     tifffile.imwrite(tmp_path / "stack.tif", _u8(lf_rgb).reshape(V * U, Y, X, 3), photometric="rgb")
     with pytest.raises(LightFieldFormatError, match="stack of 12 colour images"):
         read_lightfield(tmp_path / "stack.tif")
+    assert probe_layout(tmp_path / "stack.tif") is None  # napari's own reader opens it as a stack
     out = read_lightfield(tmp_path / "stack.tif", grid=(V, U))
     np.testing.assert_array_equal(out, _u8(lf_rgb) / np.float32(255))
     np.save(tmp_path / "g.npy", lf_rgb[..., 0].reshape(V * U, Y, X))

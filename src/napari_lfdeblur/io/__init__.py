@@ -162,6 +162,8 @@ def probe_layout(path) -> str | None:
             from ._arrays import tiff_shape
 
             shape, _dtype, meta = tiff_shape(p)
+            if len(shape) == 4 and meta.get("_series_axes", "").endswith("S"):
+                return None  # a stack of colour images, not a light field
             return layout if len(shape) in (4, 5) else None
         if layout == "h5":
             import h5py
