@@ -1,0 +1,531 @@
+"""Evaluate blind light-field deblurring against ground truth (issue 6, "Evaluation").
+
+Cases
+-----
+- ``syn``: the synthetic layered scene ``synthetic_scene(shape=(9, 9, 128, 128),
+  n_layers=3, color=True, seed=1)`` (ground-truth disparities 0.25..1.5 px/view);
+- ``lytro``: the real Lytro crop shipped with the package, ``lytro_sample()``
+  (9 x 9 x 128 x 128 x 3, views 2..10 and the central 128 x 128 pixels of
+  ``/work/shared/data/lytro-f01-img0001``);
+
+each blurred by the fixed random paths of ``PATHS`` (``random_path`` with
+fixed seeds, in-plane and with some ``z``), rendered with ``T = 128`` instants
+(far more than any solver uses), plus Gaussian noise of sigma 0.002 (seeded),
+clipped to [0, 1]. ``d_inf = 0`` for rendering and solving.
+
+Ground truth
+------------
+Each true path is moved to the zero-mean gauge for ``T = 128`` (MODEL.md,
+"Gauge of results"), so the ground-truth restored light field is the sharp
+light field itself (the view from the mean camera position).
+
+Methods
+-------
+- ``default`` and ``paper``: ``blind_deblur`` with those presets (skipped, and
+  marked so, when ``napari_lfdeblur.blind`` cannot be imported);
+- ``baseline2d``: every view deblurred on its own by the L0-gradient 2D blind
+  deconvolution of ``napari_lfdeblur._baseline2d`` (no path estimate).
+
+Metrics (``napari_lfdeblur.metrics``), spatial borders of ``CROP`` px removed:
+PSNR, SSIM, angular error (RMSE of the differences between neighbouring
+views: angular consistency), and for path estimates the blur mismatch, the
+Chamfer distance and the best-time-direction RMSE relative to the path's
+extent. Time is wall-clock time of the method call; peak memory is the peak
+resident set size above the level before the call (sampled every 10 ms), or
+``torch.cuda.max_memory_allocated`` on a GPU.
+
+Usage::
+
+    python benchmarks/blind_eval.py                       # full run, writes docs/blind_eval.md
+    python benchmarks/blind_eval.py --quick               # tiny smoke run, writes nothing
+    python benchmarks/blind_eval.py --methods baseline2d --cases syn-p1,lytro-p2
+    python benchmarks/blind_eval.py --device cuda
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import resource
+import sys
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUTPUT = ROOT / "docs" / "blind_eval.md"
+
+RENDER_TIMES = 128  # instants of the ground-truth blur
+NOISE_SIGMA = 0.002
+CROP = 8  # border pixels removed before PSNR / SSIM / angular error
+PATH_TIMES = 64  # instants for the path errors
+ALL_METHODS = ("default", "paper", "baseline2d")
+
+#: name -> (n_points, extent (box side, views), z_extent, seed) of random_path
+PATHS = {
+    "p1": (4, 2.0, 0.0, 101),
+    "p2": (4, 3.0, 0.0, 102),
+    "p3": (4, 2.5, 1.0, 103),
+}
+
+
+# ------------------------------------------------------------------ cases
+
+
+@dataclass
+class Case:
+    name: str
+    scene: str
+    sharp: np.ndarray  # ground truth, zero-mean gauge
+    blurred: np.ndarray
+    control_points: np.ndarray  # true path, zero-mean gauge for RENDER_TIMES
+    infinity_disparity: float = 0.0
+    info: dict = field(default_factory=dict)
+
+
+def _scene(name: str, quick: bool):
+    from napari_lfdeblur import lytro_sample, synthetic_scene
+
+    if name == "syn":
+        shape = (5, 5, 32, 32) if quick else (9, 9, 128, 128)
+        lf, _ = synthetic_scene(shape=shape, n_layers=3, color=True, seed=1)
+        return lf
+    if name == "lytro":
+        lf = lytro_sample()
+        if quick:
+            lf = lf[2:7, 2:7, 48:80, 48:80]
+        return np.ascontiguousarray(lf)
+    raise ValueError(f"unknown scene {name!r}")
+
+
+def make_case(name: str, quick: bool = False) -> Case:
+    """Build the case ``<scene>-<path>`` (e.g. ``syn-p1``)."""
+    from napari_lfdeblur import random_path, simulate_blur
+    from napari_lfdeblur.path import center_path
+
+    scene, _, pname = name.partition("-")
+    if pname not in PATHS:
+        raise ValueError(f"unknown case {name!r}: paths are {sorted(PATHS)}")
+    n_points, extent, z_extent, seed = PATHS[pname]
+    cp = center_path(random_path(n_points, extent=extent, z_extent=z_extent, seed=seed), RENDER_TIMES)
+    sharp = _scene(scene, quick)
+    blurred = simulate_blur(sharp, cp, n_times=RENDER_TIMES, infinity_disparity=0.0)
+    rng = np.random.default_rng(1000 + seed)
+    blurred = np.clip(blurred + rng.normal(0.0, NOISE_SIGMA, blurred.shape), 0.0, 1.0).astype(np.float32)
+    return Case(name, scene, sharp, blurred, cp, 0.0, {"path": PATHS[pname]})
+
+
+def case_names(quick: bool) -> list[str]:
+    if quick:
+        return ["syn-p2"]
+    return [f"{s}-{p}" for s in ("syn", "lytro") for p in PATHS]
+
+
+# ------------------------------------------------------------ measurement
+
+
+class PeakMemory:
+    """Peak memory of a block: RSS sampled in a thread (CPU), or CUDA's own peak."""
+
+    def __init__(self, device: str):
+        self.cuda = device.startswith("cuda")
+        self.peak = 0
+        self._stop = threading.Event()
+
+    @staticmethod
+    def _rss() -> int:
+        try:
+            import psutil
+
+            return psutil.Process().memory_info().rss
+        except ImportError:  # ru_maxrss is a lifetime peak: a coarse fallback
+            return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+    def _sample(self):
+        while not self._stop.wait(0.01):
+            self.peak = max(self.peak, self._rss())
+
+    def __enter__(self):
+        if self.cuda:
+            import torch
+
+            torch.cuda.synchronize()
+            torch.cuda.reset_peak_memory_stats()
+            self._base = torch.cuda.memory_allocated()
+        else:
+            self._base = self._rss()
+            self.peak = self._base
+            self._thread = threading.Thread(target=self._sample, daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        if self.cuda:
+            import torch
+
+            torch.cuda.synchronize()
+            self.peak = torch.cuda.max_memory_allocated()
+        else:
+            self._stop.set()
+            self._thread.join()
+            self.peak = max(self.peak, self._rss())
+        return False
+
+    @property
+    def delta_mib(self) -> float:
+        return (self.peak - self._base) / 2**20
+
+
+# ---------------------------------------------------------------- methods
+
+
+def _blind_params(blind, preset: str):
+    """The blind solver's parameters for ``preset``, whatever the solver calls it."""
+    Params = getattr(blind, "BlindParams")
+    for name in ("preset", "from_preset"):
+        make = getattr(Params, name, None)
+        if callable(make):
+            return make(preset)
+    presets = getattr(blind, "PRESETS", None)
+    if isinstance(presets, dict) and preset in presets:
+        return presets[preset]
+    raise AttributeError(f"cannot find preset {preset!r} in napari_lfdeblur.blind")
+
+
+def method_available(method: str) -> tuple[bool, str]:
+    if method == "baseline2d":
+        return True, ""
+    try:
+        from napari_lfdeblur import blind
+
+        _blind_params(blind, method)
+        getattr(blind, "blind_deblur")
+    except Exception as exc:  # noqa: BLE001 - any failure means "not available"
+        return False, f"napari_lfdeblur.blind not usable: {type(exc).__name__}: {exc}"
+    return True, ""
+
+
+def run_method(method: str, case: Case, device: str, quick: bool):
+    """Run one method; returns (restored light field, control points or None, extra info)."""
+    if method == "baseline2d":
+        from napari_lfdeblur._baseline2d import Baseline2DParams, deblur_views_2d
+
+        params = Baseline2DParams(kernel_size=7) if quick else Baseline2DParams()
+        restored, _ = deblur_views_2d(case.blurred, params)
+        return restored, None, {}
+    from napari_lfdeblur import blind
+
+    params = _blind_params(blind, method)
+    res = blind.blind_deblur(
+        case.blurred,
+        infinity_disparity=case.infinity_disparity,
+        params=params,
+        device=device,
+        seed=0,
+    )
+    info = {}
+    timings = getattr(res, "timings", None)
+    if isinstance(timings, dict):
+        info["timings"] = {k: float(v) for k, v in timings.items() if isinstance(v, (int, float))}
+    return np.asarray(res.lightfield), np.asarray(res.control_points), info
+
+
+def evaluate(case: Case, method: str, device: str, quick: bool) -> dict:
+    from napari_lfdeblur.metrics import angular_error, path_error, psnr, ssim
+
+    with PeakMemory(device) as mem:
+        t0 = time.perf_counter()
+        restored, cp, info = run_method(method, case, device, quick)
+        seconds = time.perf_counter() - t0
+    crop = 2 if quick else CROP
+    row = {
+        "case": case.name,
+        "method": method,
+        "psnr": psnr(restored, case.sharp, crop=crop),
+        "ssim": ssim(restored, case.sharp, crop=crop),
+        "angular": angular_error(restored, case.sharp, crop=crop),
+        "seconds": seconds,
+        "peak_mib": mem.delta_mib,
+        **info,
+    }
+    if cp is not None:
+        err = path_error(
+            cp,
+            case.control_points,
+            n_times=PATH_TIMES,
+            lightfield=case.sharp,
+            infinity_disparity=case.infinity_disparity,
+        )
+        row.update(
+            blur_mismatch=err.blur_mismatch,
+            chamfer=err.chamfer,
+            rmse_relative=err.rmse_relative,
+            control_points=np.asarray(cp).tolist(),
+        )
+    return row
+
+
+def input_row(case: Case, quick: bool) -> dict:
+    from napari_lfdeblur.metrics import angular_error, path_error, psnr, ssim
+
+    crop = 2 if quick else CROP
+    # the blurred input is the estimate "no motion": its path error is that of the zero path
+    err = path_error(np.zeros((2, 3)), case.control_points, n_times=PATH_TIMES, lightfield=case.sharp)
+    return {
+        "case": case.name,
+        "method": "input (blurred)",
+        "psnr": psnr(case.blurred, case.sharp, crop=crop),
+        "ssim": ssim(case.blurred, case.sharp, crop=crop),
+        "angular": angular_error(case.blurred, case.sharp, crop=crop),
+        "blur_mismatch": err.blur_mismatch,
+        "chamfer": err.chamfer,
+        "rmse_relative": err.rmse_relative,
+        "path_extent": err.extent,
+    }
+
+
+# ----------------------------------------------------------------- report
+
+
+def _fmt(value, spec):
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "—"
+    return format(value, spec)
+
+
+def _table(rows: list[dict]) -> list[str]:
+    head = (
+        "| case | method | PSNR dB | ΔPSNR dB | SSIM | angular err | blur mismatch | Chamfer (views) "
+        "| rel. RMSE | time s | peak MiB |"
+    )
+    out = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        out.append(
+            "| {case} | {method} | {psnr} | {gain} | {ssim} | {ang} | {bm} | {ch} | {rr} | {t} | {m} |".format(
+                case=r["case"],
+                method=r["method"],
+                psnr=_fmt(r.get("psnr"), ".2f"),
+                gain=_fmt(r.get("gain"), "+.2f"),
+                ssim=_fmt(r.get("ssim"), ".4f"),
+                ang=_fmt(r.get("angular"), ".4f"),
+                bm=_fmt(r.get("blur_mismatch"), ".3f"),
+                ch=_fmt(r.get("chamfer"), ".3f"),
+                rr=_fmt(r.get("rmse_relative"), ".3f"),
+                t=_fmt(r.get("seconds"), ".1f"),
+                m=_fmt(r.get("peak_mib"), ".0f"),
+            )
+        )
+    return out
+
+
+def _mean(rows, key):
+    vals = [r[key] for r in rows if isinstance(r.get(key), (int, float)) and not math.isnan(r[key])]
+    return float(np.mean(vals)) if vals else None
+
+
+def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
+    """One mean row per method (and for the input), over the cases it ran on."""
+    out = []
+    for method in ["input (blurred)", *methods]:
+        sel = [r for r in rows if r["method"] == method and "error" not in r and "skipped" not in r]
+        if not sel:
+            continue
+        out.append(
+            {
+                "case": f"**mean of {len(sel)}**",
+                "method": method,
+                **{
+                    k: _mean(sel, k)
+                    for k in ("psnr", "gain", "ssim", "angular", "blur_mismatch", "chamfer", "rmse_relative", "seconds", "peak_mib")
+                },
+            }
+        )
+    return out
+
+
+def targets(means: list[dict], quick: bool) -> list[str]:
+    """The issue's CPU targets, checked against the measured means (never assumed)."""
+    by = {r["method"]: r for r in means}
+    d, b = by.get("default"), by.get("baseline2d")
+    if d is None:
+        return ["- `default` did not run: no target can be checked."]
+    lines = []
+
+    def check(ok, text):
+        lines.append(f"- {'met' if ok else '**not met**'}: {text}")
+
+    if d.get("seconds") is not None:
+        check(d["seconds"] <= 60, f"time per light field ≤ 60 s (mean {d['seconds']:.1f} s)")
+    if d.get("gain") is not None:
+        check(d["gain"] >= 4.0, f"mean PSNR gain ≥ +4 dB (mean {d['gain']:+.2f} dB)")
+    if d.get("blur_mismatch") is not None:
+        check(d["blur_mismatch"] <= 0.2, f"mean blur mismatch ≤ 0.2 (mean {d['blur_mismatch']:.3f})")
+    if b is not None and d.get("psnr") is not None and b.get("psnr") is not None:
+        check(d["psnr"] > b["psnr"], f"PSNR above the per-view 2D baseline ({d['psnr']:.2f} vs {b['psnr']:.2f} dB)")
+        check(
+            d["angular"] < b["angular"],
+            f"angular error below the per-view 2D baseline ({d['angular']:.4f} vs {b['angular']:.4f})",
+        )
+    if quick:
+        lines.append("- (quick run: tiny sizes, the targets do not apply)")
+    return lines
+
+
+METHOD_TEXT = """\
+## How the figures are made
+
+`benchmarks/blind_eval.py` (this file is its output; rerun it to refresh).
+
+- **Cases.** `syn`: `synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=1)`,
+  layered textured planes at disparities 0.25..1.5 px/view with occlusions. `lytro`: the real Lytro
+  crop `lytro_sample()` (9×9×128×128×3; its content moves about 0.6 px/view). Each is blurred by three
+  fixed random Bézier paths (`random_path(4, extent, z_extent, seed)`: `p1` extent 2, `p2` extent 3,
+  `p3` extent 2.5 with z 1.0; seeds 101..103), rendered with **T = 128** instants — far more than a
+  solver uses — with `d_inf = 0`, plus Gaussian noise σ = 0.002 (seeded), clipped to [0, 1].
+- **Ground truth.** The true path is moved to the zero-mean gauge for T = 128, so the ground-truth
+  light field is the sharp one seen from the mean camera position (MODEL.md, "Gauge of results").
+- **Image metrics** (`napari_lfdeblur.metrics`), with {crop} border pixels cropped in y and x:
+  PSNR over all views and channels; SSIM, the mean over views and channels of scikit-image's SSIM
+  (7×7 window); **angular error**, the RMSE between the differences of neighbouring views
+  (`l[v, u+1] - l[v, u]`, `l[v+1, u] - l[v, u]`) of the estimate and of the ground truth. It measures
+  angular consistency: independent per-view processing leaves each view its own residual blur, shift
+  and ringing, which shows up in these differences even when every view looks sharp. Lower is better.
+- **Path metrics**, both paths sampled at 64 instants and moved to zero mean (FINDINGS.md §3):
+  **blur mismatch** `||B(l, p_est) - B(l, p_true)|| / ||B(l, p_true) - l||` on the ground-truth light
+  field (0 is perfect, 1 is as bad as assuming no motion); **Chamfer** distance between the two sets of
+  positions, in views (blind to time order); **rel. RMSE**, the pointwise RMSE for the better time
+  direction divided by the true path's extent (reported, not optimised for). The input row shows the
+  path errors of "no motion" (the zero path).
+- **Methods.** `default` and `paper`: `blind_deblur` with those presets, given only the blurred light
+  field and `d_inf`. `baseline2d`: each view deblurred on its own by a compact L0-gradient blind
+  deconvolution (Xu et al. 2013 / Pan et al. 2014 style; `napari_lfdeblur/_baseline2d.py`):
+  coarse-to-fine kernel estimation (11×11 kernel, pyramid factor √2) alternating an L0-gradient latent
+  update (half-quadratic splitting, FFT) with a gradient-domain least-squares kernel update (conjugate
+  gradients, non-negative, thresholded, sum 1, re-centred on its centroid), then a TV non-blind
+  deconvolution (μ = 5e-3) per colour channel. Its two free parameters (kernel size, μ) were set on a
+  scene and path not in this table (scene seed 0, path seed 50). It estimates no camera path.
+- **Time** is the wall-clock time of the method call. **Peak memory** is the peak resident set size
+  above the level before the call, sampled every 10 ms (CPU), or `torch.cuda.max_memory_allocated`
+  (GPU).
+"""
+
+
+def render(rows, means, methods, skipped, args, env) -> str:
+    lines = ["# Blind deblurring: evaluation against ground truth", ""]
+    if args.quick:
+        lines += ["**Quick smoke run at tiny sizes: not the benchmark.**", ""]
+    lines += [
+        f"Run on {env['machine']}, device `{env['device']}`, torch {env['torch']}, "
+        f"{env['threads']} torch threads, {env['date']}. Command: `{env['command']}`.",
+        "",
+        "## Summary (means over the cases)",
+        "",
+        *_table(means),
+        "",
+        "## Targets (issue 6, CPU)",
+        "",
+        *targets(means, args.quick),
+        "",
+    ]
+    if skipped:
+        lines += ["## Skipped", ""]
+        lines += [f"- `{m}`: {why}" for m, why in skipped.items()]
+        lines += [""]
+    errors = [r for r in rows if "error" in r]
+    if errors:
+        lines += ["## Failures", ""]
+        lines += [f"- `{r['method']}` on `{r['case']}`: {r['error']}" for r in errors]
+        lines += [""]
+    lines += ["## Per case", "", *_table([r for r in rows if "error" not in r]), ""]
+    lines += [METHOD_TEXT.format(crop=2 if args.quick else CROP)]
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------- main
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="tiny sizes, one case: a smoke run")
+    ap.add_argument("--cases", help="comma-separated case names, e.g. syn-p1,lytro-p3 (default: all)")
+    ap.add_argument("--methods", default=",".join(ALL_METHODS), help=f"comma-separated, from {ALL_METHODS}")
+    ap.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
+    ap.add_argument(
+        "--output",
+        help=f"markdown file to write (default {DEFAULT_OUTPUT.relative_to(ROOT)} for a full run, none for --quick)",
+    )
+    ap.add_argument("--json", help="also write every row as JSON here")
+    args = ap.parse_args(argv)
+
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    bad = [m for m in methods if m not in ALL_METHODS]
+    if bad:
+        ap.error(f"unknown method(s) {bad}; choose from {ALL_METHODS}")
+    names = [c.strip() for c in args.cases.split(",")] if args.cases else case_names(args.quick)
+    output = Path(args.output) if args.output else (None if args.quick else DEFAULT_OUTPUT)
+
+    import torch
+
+    from napari_lfdeblur.devices import select_device
+
+    device = str(select_device(args.device))
+    env = {
+        "machine": f"{platform.machine()} with {os.cpu_count()} CPUs",
+        "device": device,
+        "torch": torch.__version__,
+        "threads": torch.get_num_threads(),
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "command": "python benchmarks/blind_eval.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+    }
+    if device.startswith("cuda"):
+        env["machine"] += ", " + torch.cuda.get_device_name(0)
+
+    skipped = {}
+    for m in methods:
+        ok, why = method_available(m)
+        if not ok:
+            skipped[m] = why
+            print(f"[skip] {m}: {why}", file=sys.stderr)
+    run = [m for m in methods if m not in skipped]
+
+    rows = []
+    for name in names:
+        case = make_case(name, quick=args.quick)
+        inp = input_row(case, args.quick)
+        rows.append(inp)
+        print(f"[case] {name}: shape {case.sharp.shape}, input PSNR {inp['psnr']:.2f} dB", file=sys.stderr)
+        for m in run:
+            try:
+                row = evaluate(case, m, device, args.quick)
+                row["gain"] = row["psnr"] - inp["psnr"]
+            except Exception as exc:  # noqa: BLE001 - a failure is reported, never hidden
+                traceback.print_exc()
+                row = {"case": name, "method": m, "error": f"{type(exc).__name__}: {exc}"}
+            rows.append(row)
+            msg = row.get("error") or (
+                f"PSNR {row['psnr']:.2f} ({row['gain']:+.2f}) dB, {row['seconds']:.1f} s"
+                + (f", mismatch {row['blur_mismatch']:.3f}" if row.get("blur_mismatch") is not None else "")
+            )
+            print(f"    {m}: {msg}", file=sys.stderr)
+
+    means = summarise(rows, run)
+    text = render(rows, means, methods, skipped, args, env)
+    print(text)
+    if output is not None:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        output.write_text(text + "\n")
+        print(f"wrote {output}", file=sys.stderr)
+    if args.json:
+        Path(args.json).write_text(json.dumps({"env": env, "rows": rows, "means": means, "skipped": skipped}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,83 @@
+"""Smoke test of benchmarks/blind_eval.py at tiny sizes (baseline only), and its bookkeeping."""
+
+import importlib.util
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "blind_eval.py"
+
+
+@pytest.fixture(scope="module")
+def blind_eval():
+    spec = importlib.util.spec_from_file_location("blind_eval", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["blind_eval"] = mod  # dataclasses look their module up there
+    try:
+        spec.loader.exec_module(mod)
+        yield mod
+    finally:
+        sys.modules.pop("blind_eval", None)
+
+
+def test_quick_run_writes_a_table(blind_eval, tmp_path, capsys):
+    out, js = tmp_path / "eval.md", tmp_path / "eval.json"
+    assert blind_eval.main(["--quick", "--methods", "baseline2d", "--output", str(out), "--json", str(js)]) == 0
+    text = out.read_text()
+    assert "Quick smoke run" in text and "| syn-p2 | baseline2d |" in text
+    rows = json.loads(js.read_text())["rows"]
+    inp = next(r for r in rows if r["method"] == "input (blurred)")
+    base = next(r for r in rows if r["method"] == "baseline2d")
+    # the input's path error is that of "no motion": a blur mismatch of exactly 1
+    assert inp["blur_mismatch"] == pytest.approx(1.0, rel=1e-4)
+    assert base["gain"] == pytest.approx(base["psnr"] - inp["psnr"])
+    assert base["seconds"] > 0 and "blur_mismatch" not in base  # the 2D baseline estimates no path
+
+
+def test_case_ground_truth_is_in_the_zero_mean_gauge(blind_eval):
+    from napari_lfdeblur import bezier_positions, simulate_blur
+
+    case = blind_eval.make_case("syn-p3", quick=True)
+    assert np.abs(bezier_positions(case.control_points, blind_eval.RENDER_TIMES).mean(0)).max() < 1e-12
+    # the blurred input is the T=128 blur of the ground truth plus small noise
+    clean = simulate_blur(case.sharp, case.control_points, n_times=blind_eval.RENDER_TIMES)
+    resid = case.blurred - clean
+    assert abs(resid.std() - blind_eval.NOISE_SIGMA) < 3e-4
+    with pytest.raises(ValueError, match="unknown case"):
+        blind_eval.make_case("syn-p9", quick=True)
+
+
+def test_targets_are_checked_not_assumed(blind_eval):
+    means = [
+        {"method": "default", "seconds": 50.0, "gain": 4.5, "blur_mismatch": 0.25, "psnr": 30.0, "angular": 0.01},
+        {"method": "baseline2d", "psnr": 31.0, "angular": 0.02},
+    ]
+    lines = blind_eval.targets(means, quick=False)
+    met = [line for line in lines if line.startswith("- met")]
+    unmet = [line for line in lines if line.startswith("- **not met**")]
+    assert len(met) == 3 and len(unmet) == 2
+    assert any("blur mismatch" in line for line in unmet) and any("PSNR above" in line for line in unmet)
+    assert "did not run" in blind_eval.targets([], quick=False)[0]
+
+
+def test_summary_skips_failures_and_nan(blind_eval):
+    rows = [
+        {"case": "a", "method": "baseline2d", "psnr": 30.0, "gain": 1.0},
+        {"case": "b", "method": "baseline2d", "psnr": 32.0, "gain": math.nan},
+        {"case": "c", "method": "baseline2d", "error": "RuntimeError: boom"},
+    ]
+    (mean,) = blind_eval.summarise(rows, ["baseline2d"])
+    assert mean["psnr"] == pytest.approx(31.0) and mean["gain"] == pytest.approx(1.0)
+    assert mean["case"] == "**mean of 2**"
+
+
+def test_peak_memory_sees_an_allocation(blind_eval):
+    with blind_eval.PeakMemory("cpu") as mem:
+        a = np.ones(64 * 2**20 // 8)  # 64 MiB, touched
+        a += 1
+        del a
+    assert 48 < mem.delta_mib < 1024
