@@ -1,0 +1,192 @@
+"""Priors over 4D light fields: finite differences, total variation and their proxes.
+
+All functions work on torch tensors whose first four axes are ``(V, U, Y, X)``;
+any trailing axes (a colour axis ``C``) are carried along and never
+differenced. The differences are *forward* differences with a replicate
+(Neumann) boundary: the difference at the last sample of an axis is zero.
+
+:func:`divergence4d` is the exact negative adjoint of :func:`gradient4d`::
+
+    sum(gradient4d(L)[a] * G[a] for a in range(4)) == -sum(L * divergence4d(G))
+
+so ``-divergence4d(gradient4d(L))`` is the (positive semi-definite) Neumann
+Laplacian.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+
+__all__ = [
+    "AXES",
+    "gradient4d",
+    "divergence4d",
+    "gradient_magnitude4d",
+    "tv4d",
+    "project_tv_dual",
+    "prox_l1",
+    "gradient_norm_bound",
+]
+
+#: the four differenced axes, in order
+AXES = ("v", "u", "y", "x")
+
+
+def _check(L: torch.Tensor) -> torch.Tensor:
+    if not isinstance(L, torch.Tensor):
+        raise TypeError(f"expected a torch tensor; got {type(L).__name__}")
+    if L.ndim < 4:
+        raise ValueError(f"expected a tensor with at least the 4 axes (V, U, Y, X); got shape {tuple(L.shape)}")
+    return L
+
+
+def _weights(axis_weights) -> tuple[float, float, float, float]:
+    if axis_weights is None:
+        return (1.0, 1.0, 1.0, 1.0)
+    w = tuple(float(a) for a in axis_weights)
+    if len(w) != 4 or any(a < 0 for a in w):
+        raise ValueError(f"axis_weights must be 4 non-negative numbers (v, u, y, x); got {axis_weights!r}")
+    return w
+
+
+def gradient4d(L: torch.Tensor, axis_weights: Sequence[float] | None = None) -> tuple[torch.Tensor, ...]:
+    """Forward differences along ``v``, ``u``, ``y`` and ``x``.
+
+    Parameters
+    ----------
+    L : torch.Tensor, shape (V, U, Y, X, ...)
+        A light field (any trailing axes, e.g. colour, are not differenced).
+    axis_weights : sequence of 4 floats, optional
+        Multiply the difference along each axis by this weight (default 1).
+
+    Returns
+    -------
+    tuple of 4 torch.Tensor, each of ``L``'s shape and dtype
+        ``g[a][..., i, ...] = L[..., i + 1, ...] - L[..., i, ...]`` along axis
+        ``a``, and 0 at the last sample (replicate / Neumann boundary).
+    """
+    L = _check(L)
+    w = _weights(axis_weights)
+    out = []
+    for axis in range(4):
+        g = torch.zeros_like(L)
+        n = L.shape[axis]
+        if n > 1:
+            g.narrow(axis, 0, n - 1).copy_(L.narrow(axis, 1, n - 1) - L.narrow(axis, 0, n - 1))
+        if w[axis] != 1.0:
+            g = g * w[axis]
+        out.append(g)
+    return tuple(out)
+
+
+def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None = None) -> torch.Tensor:
+    """Discrete divergence: the exact negative adjoint of :func:`gradient4d`.
+
+    Parameters
+    ----------
+    G : sequence of 4 torch.Tensor, each of shape (V, U, Y, X, ...)
+        A vector field, one component per axis ``v, u, y, x``.
+    axis_weights : sequence of 4 floats, optional
+        The same weights as given to :func:`gradient4d`.
+
+    Returns
+    -------
+    torch.Tensor, the components' shape
+        ``div`` with ``<gradient4d(L), G> = -<L, div>`` for every ``L``.
+    """
+    if len(G) != 4:
+        raise ValueError(f"divergence4d takes 4 components (v, u, y, x); got {len(G)}")
+    w = _weights(axis_weights)
+    shape = G[0].shape
+    div = torch.zeros_like(G[0])
+    for axis, g in enumerate(G):
+        _check(g)
+        if g.shape != shape:
+            raise ValueError("divergence4d: the 4 components must have the same shape")
+        n = g.shape[axis]
+        if n == 1:
+            continue
+        # adjoint of D: (D^T g)_i = g_{i-1} - g_i with g_{-1} = 0 and g_{n-1} ignored
+        last = g.narrow(axis, 0, n - 1)
+        div.narrow(axis, 0, n - 1).add_(last, alpha=w[axis])
+        div.narrow(axis, 1, n - 1).sub_(last, alpha=w[axis])
+    return div
+
+
+def gradient_magnitude4d(grads: Sequence[torch.Tensor], eps: float = 0.0) -> torch.Tensor:
+    """Pointwise ``sqrt(sum_a g_a^2 + eps^2)`` over the four components."""
+    sq = sum(g * g for g in grads)
+    if eps:
+        sq = sq + eps * eps
+    return torch.sqrt(sq)
+
+
+def tv4d(
+    L: torch.Tensor,
+    *,
+    isotropic: bool = True,
+    eps: float = 0.0,
+    axis_weights: Sequence[float] | None = None,
+    reduction: str = "sum",
+) -> torch.Tensor:
+    """4D total variation over all four axes.
+
+    Parameters
+    ----------
+    L : torch.Tensor, shape (V, U, Y, X, ...)
+    isotropic : bool, default True
+        ``sum sqrt(g_v^2 + g_u^2 + g_y^2 + g_x^2)`` per sample (isotropic) or
+        ``sum |g_v| + |g_u| + |g_y| + |g_x|`` (anisotropic).
+    eps : float, default 0
+        Smoothing (Huber-like) ``sqrt(|g|^2 + eps^2) - eps``; keeps the value
+        differentiable at zero gradient. Anisotropic TV smooths each axis.
+    axis_weights : sequence of 4 floats, optional
+    reduction : {'sum', 'mean'}
+
+    Returns
+    -------
+    torch.Tensor, a scalar (differentiable)
+    """
+    grads = gradient4d(L, axis_weights)
+    if isotropic:
+        val = gradient_magnitude4d(grads, eps) - eps
+    else:
+        val = sum((torch.sqrt(g * g + eps * eps) - eps) if eps else g.abs() for g in grads)
+    if reduction == "sum":
+        return val.sum()
+    if reduction == "mean":
+        return val.mean()
+    raise ValueError(f"reduction must be 'sum' or 'mean'; got {reduction!r}")
+
+
+def project_tv_dual(P: Sequence[torch.Tensor], radius: float, isotropic: bool = True) -> tuple[torch.Tensor, ...]:
+    """Project a dual field onto the TV dual ball (the prox of the conjugate of ``radius * TV``).
+
+    Isotropic: each sample's 4-vector is scaled into the l2 ball of ``radius``;
+    anisotropic: each component is clipped to ``[-radius, radius]``.
+    Works in place on ``P`` and returns it.
+    """
+    if isotropic:
+        norm = gradient_magnitude4d(P)
+        scale = torch.clamp(norm / radius, min=1.0) if radius > 0 else None
+        for p in P:
+            if scale is None:
+                p.zero_()
+            else:
+                p.div_(scale)
+    else:
+        for p in P:
+            p.clamp_(-radius, radius)
+    return tuple(P)
+
+
+def prox_l1(x: torch.Tensor, threshold: float) -> torch.Tensor:
+    """Soft thresholding ``sign(x) max(|x| - threshold, 0)`` (the prox of ``threshold |.|_1``)."""
+    return torch.sign(x) * torch.clamp(x.abs() - threshold, min=0.0)
+
+
+def gradient_norm_bound(axis_weights: Sequence[float] | None = None) -> float:
+    """An upper bound on ``||gradient4d||^2`` (operator norm squared): ``4 sum_a w_a^2``."""
+    return 4.0 * sum(a * a for a in _weights(axis_weights))
