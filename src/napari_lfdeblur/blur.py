@@ -225,18 +225,23 @@ def _rows_per_block(n_per_row: int, budget: int, Y: int) -> int:
 
 
 class _Taps:
-    """Block-wise application of a tap kernel and of its adjoint (no autograd)."""
+    """Block-wise application of a tap kernel, its adjoint and its kernel gradient (no autograd).
+
+    Inside a block the light field is held as ``(V, U, C, rows, X)``, so the
+    innermost loop of every multiply-add runs along ``x`` with the kernel
+    contiguous too.
+    """
 
     def __init__(self, shape, K, ov, ou, block_elements):
         V, U, Y, X, C = shape
         self.shape = shape
-        self.K = K
         Dv, Du = K.shape[2], K.shape[3]
+        self.Kt = K.detach().permute(2, 3, 0, 1).contiguous()  # (Dv, Du, Y, X)
         dev = K.device
-        # replicate padding as index vectors: padded row i reads row iv[i]
+        # replicate padding as index vectors: padded view i reads view iv[i]
         self.iv = torch.arange(ov, ov + V + Dv - 1, device=dev).clamp_(0, V - 1)
         self.iu = torch.arange(ou, ou + U + Du - 1, device=dev).clamp_(0, U - 1)
-        active = (K.detach().abs().amax(dim=(0, 1)) > 0).nonzero().tolist()
+        active = (self.Kt.abs().amax(dim=(2, 3)) > 0).nonzero().tolist()
         self.taps = [(int(i), int(j)) for i, j in active]
         self.step = _rows_per_block((V + Dv - 1) * (U + Du - 1) * X * C, block_elements, Y)
 
@@ -245,45 +250,50 @@ class _Taps:
         for y0 in range(0, Y, self.step):
             yield slice(y0, min(Y, y0 + self.step))
 
-    def _pad(self, Lb):
-        return Lb.index_select(0, self.iv).index_select(1, self.iu)
+    def _padded(self, T, rows):
+        """Block ``rows`` of ``T``, replicate-padded in (v, u), as (V', U', C, rows, X)."""
+        Tb = T[:, :, rows][self.iv[:, None], self.iu[None, :]]
+        return Tb.permute(0, 1, 4, 2, 3).contiguous()
+
+    @staticmethod
+    def _block(T, rows):
+        return T[:, :, rows].permute(0, 1, 4, 2, 3).contiguous()
 
     def forward(self, L):
         V, U = self.shape[:2]
         out = torch.empty_like(L)
         for rows in self.blocks():
-            Lp = self._pad(L[:, :, rows])
-            Kb = self.K[rows]
-            acc = torch.zeros_like(out[:, :, rows])
+            Lp = self._padded(L, rows)
+            acc = Lp.new_zeros((V, U) + Lp.shape[2:])
             for i, j in self.taps:
-                acc.addcmul_(Lp[i : i + V, j : j + U], Kb[None, None, :, :, i, j, None])
-            out[:, :, rows] = acc
+                acc.addcmul_(Lp[i : i + V, j : j + U], self.Kt[i, j, rows])
+            out[:, :, rows] = acc.permute(0, 1, 3, 4, 2)
         return out
+
+    def backward(self, L, G, need_L=True, need_K=False):
+        """``(adjoint(G), d<G, forward(L)>/dK)``, each None when not needed."""
+        V, U = self.shape[:2]
+        gL = torch.empty_like(G) if need_L else None
+        gKt = torch.zeros_like(self.Kt) if need_K else None
+        for rows in self.blocks():
+            Gb = self._block(G, rows)
+            if need_K:
+                Lp = self._padded(L, rows)
+                for i, j in self.taps:
+                    gKt[i, j, rows] = (Gb * Lp[i : i + V, j : j + U]).sum(dim=(0, 1, 2))
+            if need_L:
+                gp = Gb.new_zeros((len(self.iv), len(self.iu)) + Gb.shape[2:])
+                for i, j in self.taps:
+                    gp[i : i + V, j : j + U].addcmul_(Gb, self.Kt[i, j, rows])
+                # adjoint of the replicate padding: add padded views back onto the edges
+                gv = Gb.new_zeros((V, len(self.iu)) + Gb.shape[2:]).index_add_(0, self.iv, gp)
+                gb = Gb.new_zeros(Gb.shape).index_add_(1, self.iu, gv)
+                gL[:, :, rows] = gb.permute(0, 1, 3, 4, 2)
+        gK = gKt.permute(2, 3, 0, 1) if need_K else None
+        return gL, gK
 
     def adjoint(self, G):
-        V, U = self.shape[:2]
-        out = torch.empty_like(G)
-        for rows in self.blocks():
-            Gb = G[:, :, rows]
-            Kb = self.K[rows]
-            gp = Gb.new_zeros((len(self.iv), len(self.iu)) + Gb.shape[2:])
-            for i, j in self.taps:
-                gp[i : i + V, j : j + U].addcmul_(Gb, Kb[None, None, :, :, i, j, None])
-            # adjoint of the replicate padding: add the padded views back onto the edges
-            gv = Gb.new_zeros((V, len(self.iu)) + Gb.shape[2:]).index_add_(0, self.iv, gp)
-            out[:, :, rows] = Gb.new_zeros(Gb.shape).index_add_(1, self.iu, gv)
-        return out
-
-    def kernel_gradient(self, L, G):
-        """d<G, forward(L)>/dK, shape of K."""
-        V, U = self.shape[:2]
-        gK = torch.zeros_like(self.K)
-        for rows in self.blocks():
-            Lp = self._pad(L[:, :, rows])
-            Gb = G[:, :, rows]
-            for i, j in self.taps:
-                gK[rows, :, i, j] = torch.einsum("abyxc,abyxc->yx", Gb, Lp[i : i + V, j : j + U])
-        return gK
+        return self.backward(None, G, need_L=True, need_K=False)[0]
 
 
 class _TapBlur(torch.autograd.Function):
@@ -291,7 +301,7 @@ class _TapBlur(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, L, K, ov, ou, block_elements):
-        taps = _Taps(L.shape, K.detach(), ov, ou, block_elements)
+        taps = _Taps(L.shape, K, ov, ou, block_elements)
         ctx.save_for_backward(L)
         ctx.taps = taps
         return taps.forward(L)
@@ -299,9 +309,7 @@ class _TapBlur(torch.autograd.Function):
     @staticmethod
     def backward(ctx, G):
         (L,) = ctx.saved_tensors
-        G = G.contiguous()
-        gL = ctx.taps.adjoint(G) if ctx.needs_input_grad[0] else None
-        gK = ctx.taps.kernel_gradient(L, G) if ctx.needs_input_grad[1] else None
+        gL, gK = ctx.taps.backward(L, G, ctx.needs_input_grad[0], ctx.needs_input_grad[1])
         return gL, gK, None, None, None
 
 
