@@ -253,3 +253,78 @@ def test_epi_layers_follow_the_pick(make_napari_viewer, lf):
     np.testing.assert_array_equal(viewer.layers["lf EPI v"].data, lf[:, 2, :, 11].T)
     assert viewer.layers["lf EPI h"].metadata["y"] == 3
     assert len(viewer.layers) == 3  # updated in place, not added again
+
+
+# --------------------------------------------------------------- blind
+
+
+def _blind_layer(viewer, lf):
+    from napari_lfdeblur._napari.layers import add_layer, lightfield_layer_data, lightfield_metadata
+    from napari_lfdeblur.path import linear_path
+
+    cp = linear_path(1.5, angle_deg=20.0)
+    meta = lightfield_metadata(kind="blurred", control_points=cp, n_times=16, infinity_disparity=0.0)
+    blurred = simulate_blur(lf, cp, n_times=16)
+    return add_layer(viewer, lightfield_layer_data(blurred, name="b", metadata=meta)), cp
+
+
+def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
+    pytest.importorskip("napari_lfdeblur.blind")
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+
+    viewer = make_napari_viewer()
+    layer, cp_true = _blind_layer(viewer, lf)
+    before = layer.data.copy()
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    assert w.true_combo.currentText() == "b"  # the true path comes from the metadata
+    w.points_spin.setValue(3)
+    w.iter_spin.setValue(2)
+    w.device_combo.setCurrentText("cpu")
+    w.preview_spin.setValue(1)
+    w.run()
+    _wait_done(qtbot, w)
+    assert not [n for n in notifications if n[0] == "error"], notifications
+    assert [layer.name for layer in viewer.layers] == ["b", "b deblurred (blind)", "b estimated path"]
+    out = viewer.layers["b deblurred (blind)"]
+    res = w.last_result
+    assert out.data.shape == SHAPE and out.axis_labels == ("v", "u", "y", "x")
+    np.testing.assert_array_equal(out.data, res.lightfield)
+    meta = out.metadata
+    cp = np.asarray(meta["control_points"])
+    assert cp.shape == (3, 3)
+    np.testing.assert_allclose(cp, res.control_points)
+    # zero-mean gauge (MODEL.md)
+    np.testing.assert_allclose(bezier_positions(cp, meta["n_times"]).mean(axis=0), 0.0, atol=1e-5)
+    assert meta["napari_lfdeblur_version"] == napari_lfdeblur.__version__
+    assert meta["parameters"]["device"] == "cpu" and meta["parameters"]["seed"] == 0
+    assert meta["loss_history"] == [float(v) for v in res.loss_history]
+    path = viewer.layers["b estimated path"]
+    np.testing.assert_allclose(path.metadata["true_control_points"], cp_true)
+    np.testing.assert_allclose(path.metadata["control_points"], cp)
+    assert w.loss_plot.values  # the loss curve was drawn
+    np.testing.assert_array_equal(layer.data, before)
+
+
+def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, notifications):
+    pytest.importorskip("napari_lfdeblur.blind")
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+
+    viewer = make_napari_viewer()
+    layer, _ = _blind_layer(viewer, lf)
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    w.iter_spin.setValue(100000)
+    w.device_combo.setCurrentText("cpu")
+    w.preview_spin.setValue(1)
+    w.run()
+    # wait for the live preview (a layer) and the first loss values
+    qtbot.waitUntil(lambda: "b blind (preview)" in viewer.layers, timeout=TIMEOUT)
+    assert w.is_running
+    w.cancel()
+    qtbot.waitUntil(lambda: not w.is_running, timeout=10_000)
+    qtbot.wait(100)
+    assert [layer.name for layer in viewer.layers] == ["b"]
+    assert w.last_result is None
+    assert ("info", "Blind deblur: cancelled") in notifications
+    assert not [n for n in notifications if n[0] == "error"], notifications

@@ -1,0 +1,103 @@
+"""Layer data tuples for light fields, EPIs and camera paths (no viewer needed)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("napari")
+
+from napari.layers import Image, Layer  # noqa: E402
+
+import napari_lfdeblur  # noqa: E402
+from napari_lfdeblur._napari.layers import (  # noqa: E402
+    LayerError,
+    control_points_from_layer,
+    epi_layer_data,
+    lightfield_from_layer,
+    lightfield_layer_data,
+    lightfield_metadata,
+    path_layer_data,
+    path_scale,
+)
+from napari_lfdeblur.path import bezier_positions  # noqa: E402
+
+
+def test_lightfield_layer_grey_and_colour():
+    grey = np.zeros((3, 4, 8, 10), np.float32)
+    data, kw, kind = lightfield_layer_data(grey, name="g", metadata={"a": 1})
+    layer = Layer.create(data, kw, kind)
+    assert kind == "image" and not layer.rgb
+    assert layer.axis_labels == ("v", "u", "y", "x") and layer.metadata == {"a": 1}
+    colour = np.zeros((3, 4, 8, 10, 3), np.float32)
+    layer = Layer.create(*lightfield_layer_data(colour, name="c"))
+    assert layer.rgb and layer.data.shape == colour.shape
+    # a single channel is squeezed to 4D
+    data, kw, _ = lightfield_layer_data(grey[..., None], name="s")
+    assert data.shape == grey.shape and not kw["rgb"]
+
+
+def test_metadata_holds_version_parameters_and_path():
+    meta = lightfield_metadata(kind="blurred", parameters={"w": 1}, control_points=[[0, 0, 0], [1, 2, 3]],
+                               n_times=8, infinity_disparity=0.5, source_layer="x", extra=3)
+    assert meta["napari_lfdeblur_version"] == napari_lfdeblur.__version__
+    assert meta["control_points"] == [[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]]
+    assert meta["parameters"] == {"w": 1} and meta["n_times"] == 8 and meta["extra"] == 3
+
+
+def test_lightfield_from_layer_copies_and_scales_integers():
+    data = np.full((2, 2, 3, 3), 255, np.uint8)
+    layer = Image(data)
+    lf = lightfield_from_layer(layer)
+    assert lf.dtype == np.float32 and np.all(lf == 1.0)
+    f = np.random.default_rng(0).random((2, 2, 3, 3)).astype(np.float32)
+    layer = Image(f)
+    lf = lightfield_from_layer(layer)
+    lf[...] = 0
+    assert np.all(layer.data == f)  # a copy: the layer is untouched
+
+
+@pytest.mark.parametrize(
+    "layer, message",
+    [(None, "no light-field layer"), (Image(np.zeros((8, 8))), "4D"), (Image(np.zeros((2, 8, 8))), "4D")],
+)
+def test_lightfield_from_layer_rejects(layer, message):
+    with pytest.raises(LayerError, match=message):
+        lightfield_from_layer(layer)
+
+
+def test_path_layer_frame():
+    cp = np.array([[-1.0, 0.5, 0.0], [1.0, -0.5, 0.2], [0.5, 1.0, 0.0]])
+    shape = (5, 7, 20, 30)
+    shapes, kw, kind = path_layer_data(cp, shape, n_times=9, true_control_points=cp * 0.5)
+    s = path_scale(shape)
+    assert s == 20 / (2 * 7)
+    assert kind == "shapes" and kw["shape_type"] == ["rectangle", "path", "path", "ellipse"]
+    rect, true_line, line, start = shapes
+    # aperture: views -(U-1)/2 .. (U-1)/2 around the centre pixel
+    np.testing.assert_allclose(rect, [[9.5 - 2 * s, 14.5 - 3 * s], [9.5 + 2 * s, 14.5 + 3 * s]])
+    pos = bezier_positions(cp, 9)
+    np.testing.assert_allclose(line, np.stack([9.5 + s * pos[:, 1], 14.5 + s * pos[:, 0]], axis=1))
+    np.testing.assert_allclose(start.mean(axis=0), line[0])
+    np.testing.assert_allclose(true_line, np.stack([9.5 + s * pos[:, 1] / 2, 14.5 + s * pos[:, 0] / 2], axis=1))
+    assert kw["metadata"]["pixels_per_view"] == s
+    np.testing.assert_allclose(control_points_from_layer(Layer.create(shapes, kw, kind)), cp)
+
+
+def test_epi_layer_data():
+    lf = np.random.default_rng(0).random((5, 6, 12, 16, 3)).astype(np.float32)
+    data, kw, _ = epi_layer_data(lf, "h", name="h", v=1, y=4)
+    np.testing.assert_array_equal(data, lf[1, :, 4, :])
+    assert kw["rgb"] and kw["translate"][0] > 12
+    data, kw, _ = epi_layer_data(lf, "v", name="v", u=2, x=9)
+    np.testing.assert_array_equal(data, np.swapaxes(lf[:, 2, :, 9], 0, 1))
+    assert kw["translate"][1] > 16
+    with pytest.raises(ValueError):
+        epi_layer_data(lf, "q", name="q")
+    with pytest.raises(ValueError):
+        epi_layer_data(lf, "h", name="h", v=9)
+
+
+def test_no_path_in_metadata():
+    with pytest.raises(LayerError, match="holds no camera path"):
+        control_points_from_layer(Image(np.zeros((2, 2, 4, 4)), name="x"))
