@@ -43,6 +43,8 @@ def _save(viewer, name):
     import imageio.v3 as iio
 
     _settle(viewer)
+    viewer.reset_view()  # after the dock widgets took their room
+    _settle(viewer, 0.3)
     img = viewer.screenshot(canvas_only=False, flash=False)
     OUT.mkdir(parents=True, exist_ok=True)
     path = OUT / name
