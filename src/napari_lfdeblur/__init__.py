@@ -48,6 +48,7 @@ _PUBLIC = {
     "iter_deconvolve": "deconvolution",
     "refocus": "deconvolution",
     "recover_plane_texture": "deconvolution",
+    "DeconvolutionParams": "deconvolution",
     # blind deblurring
     "blind_deblur": "blind",
     "iter_blind_deblur": "blind",

@@ -1,0 +1,123 @@
+"""4D finite differences, divergence (exact negative adjoint), TV and its dual projection."""
+
+import numpy as np
+import pytest
+import torch
+
+from napari_lfdeblur.priors import (
+    divergence4d,
+    gradient4d,
+    gradient_norm_bound,
+    project_tv_dual,
+    prox_l1,
+    tv4d,
+)
+
+
+def _np_forward_diff(a, axis):
+    out = np.zeros_like(a)
+    n = a.shape[axis]
+    sl_hi = [slice(None)] * a.ndim
+    sl_lo = [slice(None)] * a.ndim
+    sl_hi[axis] = slice(1, n)
+    sl_lo[axis] = slice(0, n - 1)
+    out[tuple(sl_lo)] = a[tuple(sl_hi)] - a[tuple(sl_lo)]
+    return out
+
+
+@pytest.mark.parametrize("shape", [(3, 4, 5, 6), (2, 3, 4, 5, 3), (1, 4, 1, 5)])
+def test_gradient_matches_numpy_forward_differences(shape):
+    a = np.random.default_rng(0).random(shape)
+    g = gradient4d(torch.from_numpy(a))
+    assert len(g) == 4
+    for axis in range(4):
+        np.testing.assert_allclose(g[axis].numpy(), _np_forward_diff(a, axis), atol=1e-12)
+        # Neumann boundary: zero at the last sample of the differenced axis
+        assert np.all(g[axis].numpy().take(-1, axis=axis) == 0)
+
+
+def test_gradient_of_a_ramp_is_one_inside_zero_at_the_end():
+    v, u, y, x = np.meshgrid(*(np.arange(n, dtype=float) for n in (3, 4, 5, 6)), indexing="ij")
+    ramp = torch.from_numpy(2 * v - u + 0.5 * y + 3 * x)
+    want = (2.0, -1.0, 0.5, 3.0)
+    for axis, g in enumerate(gradient4d(ramp)):
+        inner = g.numpy().take(range(ramp.shape[axis] - 1), axis=axis)
+        np.testing.assert_allclose(inner, want[axis])
+
+
+@pytest.mark.parametrize("shape", [(3, 4, 5, 6), (2, 3, 4, 5, 3), (1, 2, 7, 1)])
+@pytest.mark.parametrize("weights", [None, (0.5, 2.0, 1.0, 3.0)])
+def test_divergence_is_exact_negative_adjoint(shape, weights):
+    rng = np.random.default_rng(1)
+    L = torch.from_numpy(rng.standard_normal(shape))
+    G = [torch.from_numpy(rng.standard_normal(shape)) for _ in range(4)]
+    lhs = sum((g * h).sum() for g, h in zip(gradient4d(L, weights), G))
+    rhs = -(L * divergence4d(G, weights)).sum()
+    assert abs(float(lhs - rhs)) < 1e-10 * max(1.0, abs(float(lhs)))
+
+
+def test_divergence_matches_autograd_vjp():
+    rng = np.random.default_rng(2)
+    L = torch.from_numpy(rng.standard_normal((3, 3, 4, 4))).requires_grad_(True)
+    G = [torch.from_numpy(rng.standard_normal((3, 3, 4, 4))) for _ in range(4)]
+    s = sum((g * h).sum() for g, h in zip(gradient4d(L), G))
+    (vjp,) = torch.autograd.grad(s, L)
+    torch.testing.assert_close(vjp, -divergence4d(G))
+
+
+def test_tv_values_against_brute_force():
+    a = np.random.default_rng(3).random((2, 3, 4, 5))
+    grads = [_np_forward_diff(a, ax) for ax in range(4)]
+    iso = np.sqrt(sum(g**2 for g in grads)).sum()
+    aniso = sum(np.abs(g).sum() for g in grads)
+    t = torch.from_numpy(a)
+    assert float(tv4d(t)) == pytest.approx(iso, rel=1e-12)
+    assert float(tv4d(t, isotropic=False)) == pytest.approx(aniso, rel=1e-12)
+    assert float(tv4d(t, reduction="mean")) == pytest.approx(iso / a.size, rel=1e-12)
+    # smoothing: 0 <= TV - TV_eps and -> 0 as eps -> 0
+    assert 0 <= iso - float(tv4d(t, eps=1e-2)) < iso
+    assert float(tv4d(t, eps=1e-8)) == pytest.approx(iso, rel=1e-6)
+    assert float(tv4d(torch.ones(2, 2, 3, 3))) == 0.0
+
+
+def test_dual_projection_and_soft_threshold():
+    rng = np.random.default_rng(4)
+    P = [torch.from_numpy(rng.standard_normal((2, 2, 5, 5))) for _ in range(4)]
+    orig = [p.clone() for p in P]
+    project_tv_dual(P, 0.5, isotropic=True)
+    norm = torch.sqrt(sum(p * p for p in P))
+    onorm = torch.sqrt(sum(p * p for p in orig))
+    assert float(norm.max()) <= 0.5 + 1e-12
+    inside = onorm <= 0.5
+    for p, o in zip(P, orig):
+        torch.testing.assert_close(p[inside], o[inside])  # unchanged inside the ball
+        # outside: same direction, radius 0.5
+        torch.testing.assert_close(p[~inside], (o / onorm * 0.5)[~inside])
+    Q = [o.clone() for o in orig]
+    project_tv_dual(Q, 0.3, isotropic=False)
+    for q, o in zip(Q, orig):
+        torch.testing.assert_close(q, o.clamp(-0.3, 0.3))
+    x = torch.tensor([-2.0, -0.1, 0.0, 0.2, 3.0])
+    torch.testing.assert_close(prox_l1(x, 0.5), torch.tensor([-1.5, 0.0, 0.0, 0.0, 2.5]))
+
+
+def test_gradient_norm_bound_holds():
+    # power iteration on -div(grad) estimates ||grad||^2
+    x = torch.from_numpy(np.random.default_rng(5).standard_normal((4, 4, 6, 6)))
+    for _ in range(200):
+        x = -divergence4d(gradient4d(x))
+        x = x / torch.linalg.vector_norm(x)
+    est = float((x * -divergence4d(gradient4d(x))).sum())
+    assert est <= gradient_norm_bound() + 1e-9
+    assert est > 0.5 * gradient_norm_bound()
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="4 axes"):
+        gradient4d(torch.zeros(3, 3, 3))
+    with pytest.raises(ValueError, match="axis_weights"):
+        gradient4d(torch.zeros(2, 2, 2, 2), axis_weights=(1, 1))
+    with pytest.raises(ValueError, match="4 components"):
+        divergence4d([torch.zeros(2, 2, 2, 2)] * 3)
+    with pytest.raises(ValueError, match="reduction"):
+        tv4d(torch.zeros(2, 2, 2, 2), reduction="max")
