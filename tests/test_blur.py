@@ -147,3 +147,20 @@ def test_operator_rejects_wrong_shape():
     with pytest.raises(ValueError, match="shape"):
         op.forward(torch.zeros(3, 3, 4, 5, 1))
     assert to_tensor(np.zeros((3, 3, 4, 4))).shape == (3, 3, 4, 4, 1)
+
+
+def test_in_plane_blur_is_one_angular_matrix_per_pixel():
+    """In-plane motion: every pixel's (V*U) angular vector sees M = mean_k B_k (x) A_k."""
+    from napari_lfdeblur.blur import interpolation_matrices
+
+    rng = np.random.default_rng(4)
+    lf = rng.random((4, 5, 6, 7)).astype(np.float32)
+    cp = random_path(3, extent=3.0, seed=9)  # p_z = 0
+    T = 6
+    pos = torch.tensor(bezier_positions(cp, T))
+    A, B, _, _ = interpolation_matrices(pos, lf.shape)
+    M = sum(np.kron(B[k, 0].numpy(), A[k, 0].numpy()) for k in range(T)) / T
+    want = (M @ lf.reshape(20, -1)).reshape(lf.shape)
+    np.testing.assert_allclose(simulate_blur(lf, cp, n_times=T), want, atol=1e-5)
+    # rows sum to one: the blur preserves constants
+    np.testing.assert_allclose(M.sum(axis=1), 1.0, atol=1e-12)
