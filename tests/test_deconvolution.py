@@ -273,3 +273,33 @@ def test_plane_texture_bad_input():
         recover_plane_texture(lf, disparity=1.0, n_slices=1)
     with pytest.raises(ValueError, match="disparity"):
         refocus(lf, float("inf"))
+
+
+# ------------------------------------------------------------------ CLI
+
+
+def test_cli_deconvolve(tmp_path, capsys):
+    from napari_lfdeblur.cli import main
+    from napari_lfdeblur.io import read_lightfield
+    from napari_lfdeblur.path import save_path_json
+
+    lf = np.random.default_rng(8).random((5, 5, 10, 10)).astype(np.float32)
+    cp = linear_path(1.5, angle_deg=10)
+    blurred = simulate_blur(lf, cp, n_times=8)
+    src = tmp_path / "blurred.npz"
+    np.savez(src, lf=blurred)
+    path_file = save_path_json(tmp_path / "path.json", cp, n_times=8)
+    out = tmp_path / "out.npz"
+    assert main(["deconvolve", str(src), str(path_file), str(out), "--weight", "0"]) == 0
+    got = read_lightfield(out)
+    assert np.abs(got - lf).max() < 1e-3  # n_times came from the path file; exact in-plane inverse
+    # an existing output is kept unless --overwrite
+    assert main(["deconvolve", str(src), str(path_file), str(out)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--method", "tv",
+                 "--iterations", "3", "--device", "cpu"]) == 0
+    # bad input: one line, exit status 2
+    assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--weight", "-1"]) == 2
+    assert "weight" in capsys.readouterr().err
+    assert main(["deconvolve", str(tmp_path / "missing.npz"), str(path_file), str(out), "--overwrite"]) == 2
+    assert main(["deconvolve", str(src), str(tmp_path / "nopath.json"), str(out), "--overwrite"]) == 2

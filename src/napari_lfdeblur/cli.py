@@ -153,9 +153,74 @@ def _run_info(args):
         print(f"  {key}: {json.dumps(value, default=str)}")
 
 
+# ------------------------------------------------------------ deconvolve
+
+
+def _add_deconvolve(sub):
+    p = sub.add_parser("deconvolve", help="undo the blur of a known camera path (non-blind)")
+    p.add_argument("input", help="blurred light field file or folder")
+    p.add_argument("path_json", help="JSON file of the path's control points (as written by simulate)")
+    p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
+    p.add_argument("--method", default="auto", choices=["auto", "tv", "inplane"],
+                   help="auto (default: inplane when p_z = 0 and d_inf = 0, else tv), tv or inplane")
+    p.add_argument("--weight", type=float, default=None, help="regularisation weight >= 0 (default 2e-3)")
+    p.add_argument("--iterations", type=int, default=200, help="maximum TV iterations (default 200)")
+    p.add_argument("--tol", type=float, default=1e-4, help="TV stops at this relative change (default 1e-4)")
+    p.add_argument("--n-times", type=int, default=None,
+                   help="exposure instants T (default: the path file's n_times, else 32)")
+    p.add_argument("--infinity-disparity", type=float, default=None,
+                   help="d_inf in px/view (default: the path file's infinity_disparity, else 0)")
+    p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+
+
+def _run_deconvolve(args):
+    import json
+
+    from .deconvolution import iter_deconvolve
+    from .io import write_lightfield
+    from .path import load_path_json
+
+    out = Path(args.output)
+    if out.exists() and not args.overwrite:
+        raise CLIError(f"{out} exists; pass --overwrite to replace it")
+    cp = load_path_json(args.path_json)
+    try:
+        doc = json.loads(Path(args.path_json).read_text())
+    except (OSError, ValueError):
+        doc = {}
+    doc = doc if isinstance(doc, dict) else {}
+    n_times = args.n_times if args.n_times is not None else int(doc.get("n_times", 32))
+    d_inf = args.infinity_disparity
+    if d_inf is None:
+        d_inf = float(doc.get("infinity_disparity", 0.0))
+    blurred = _read(args.input)
+    gen = iter_deconvolve(
+        blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device,
+        method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
+    )
+    bar = _progress(total=args.iterations, desc="deconvolve", unit="it")
+    try:
+        while True:
+            try:
+                rec = next(gen)
+            except StopIteration as stop:
+                result = stop.value
+                break
+            bar.total = rec.n_iterations
+            bar.n = rec.iteration
+            bar.set_postfix_str(f"{rec.stage} loss={rec.loss:.4g}", refresh=False)
+            bar.refresh()
+    finally:
+        gen.close()
+        bar.close()
+    write_lightfield(out, result, overwrite=args.overwrite)
+    print(f"wrote {out} {result.shape} ({rec.stage}, {rec.iteration} iteration(s))")
+
+
 # ------------------------------------------------------------------ main
 
-_COMMANDS = ["simulate", "demo", "info"]
+_COMMANDS = ["simulate", "deconvolve", "demo", "info"]
 
 
 def build_parser() -> argparse.ArgumentParser:
