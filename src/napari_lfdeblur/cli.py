@@ -103,12 +103,14 @@ def _add_demo(sub):
     p.add_argument("--out", default="demo_out", help="output folder (default demo_out)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--quick", action="store_true", help="smaller sizes and fewer iterations, for tests")
+    p.add_argument("--skip-blind", action="store_true", help="skip blind deblurring (the slowest step)")
 
 
 def _run_demo(args):
     from .demo import run_demo
 
-    summary = run_demo(args.out, device=args.device, quick=args.quick, progress=_progress)
+    summary = run_demo(args.out, device=args.device, quick=args.quick, blind=not args.skip_blind,
+                       progress=_progress)
     print(f"demo results in {summary['out_dir']}:")
     for name in summary["files"]:
         print(f"  {name}")

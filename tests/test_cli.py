@@ -1,0 +1,74 @@
+"""The lfdeblur command: simulate, demo and error handling."""
+
+import json
+
+import numpy as np
+import pytest
+
+from napari_lfdeblur import read_lightfield, simulate_blur
+from napari_lfdeblur.cli import main
+from napari_lfdeblur.path import linear_path, load_path_json, save_path_json
+
+
+@pytest.fixture
+def lf_file(tmp_path):
+    lf = np.random.default_rng(0).random((5, 5, 12, 12)).astype(np.float32)
+    np.save(tmp_path / "lf.npy", lf)
+    return lf, tmp_path / "lf.npy"
+
+
+def test_simulate_with_preset(lf_file, tmp_path):
+    lf, src = lf_file
+    out = tmp_path / "blurred.npz"
+    assert main(["simulate", str(src), str(out), "--path", "linear:2", "--n-times", "8"]) == 0
+    np.testing.assert_allclose(read_lightfield(out), simulate_blur(lf, linear_path(2.0), n_times=8), atol=1e-6)
+
+
+def test_simulate_with_json_path_and_no_overwrite(lf_file, tmp_path, capsys):
+    lf, src = lf_file
+    cp = np.array([[0.3, -0.2, 0.1], [-0.5, 0.4, -0.2], [0.8, 0.1, 0.0]])
+    save_path_json(tmp_path / "path.json", cp)
+    out = tmp_path / "b.npz"
+    args = ["simulate", str(src), str(out), "--path", str(tmp_path / "path.json"), "--infinity-disparity", "0.5"]
+    assert main(args) == 0
+    np.testing.assert_allclose(
+        read_lightfield(out), simulate_blur(lf, cp, n_times=32, infinity_disparity=0.5), atol=1e-6
+    )
+    before = out.read_bytes()
+    assert main(args) == 2  # exists: refused, file untouched
+    assert "exists" in capsys.readouterr().err
+    assert out.read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["simulate", "missing.npy", "o.npz", "--path", "linear"], "does not exist"),
+        (["simulate", "{src}", "o.npz", "--path", "zigzag"], "neither a JSON file nor a preset"),
+        (["simulate", "{src}", "o.npz", "--path", "linear", "--n-times", "1"], "n_times"),
+        (["simulate", "{src}", "o.npz", "--path", "nothere.json"], "does not exist"),
+    ],
+)
+def test_cli_errors_are_one_line(args, message, lf_file, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _, src = lf_file
+    code = main([a.format(src=src) for a in args])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert message in err and "Traceback" not in err
+    assert not (tmp_path / "o.npz").exists()
+
+
+def test_demo_quick(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--quick", "--skip-blind"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for name in ("synthetic", "lytro"):
+        rec = summary["samples"][name]
+        assert (out / f"{name}.png").stat().st_size > 10_000
+        # the written blurred light field carries the true path
+        blurred = read_lightfield(out / f"{name}_blurred.npz")
+        assert list(blurred.shape) == rec["shape"]
+        # deconvolution with the known path beats the blurred input
+        assert rec["psnr_db"]["deconvolved (path known)"] > rec["psnr_db"]["blurred"] + 1.0
+    np.testing.assert_allclose(load_path_json(out / "synthetic_blurred.path.json"), summary["true_control_points"])

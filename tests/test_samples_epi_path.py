@@ -1,0 +1,141 @@
+"""Sample data, EPIs and path helpers against independent expectations."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from _reference import bezier_reference
+from napari_lfdeblur import (
+    arc_path,
+    bezier_positions,
+    center_path,
+    horizontal_epi,
+    linear_path,
+    load_path_json,
+    lytro_sample,
+    random_path,
+    save_path_json,
+    synthetic_scene,
+    vertical_epi,
+)
+from napari_lfdeblur.path import PRESETS, preset_path
+
+from conftest import LYTRO_DIR
+
+
+def test_synthetic_scene_is_seeded_and_in_range():
+    a, da = synthetic_scene((5, 5, 32, 32), n_layers=3, color=True, seed=3)
+    b, db = synthetic_scene((5, 5, 32, 32), n_layers=3, color=True, seed=3)
+    c, _ = synthetic_scene((5, 5, 32, 32), n_layers=3, color=True, seed=4)
+    assert a.shape == (5, 5, 32, 32, 3) and a.dtype == np.float32 and da.shape == (32, 32)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(da, db)
+    assert not np.array_equal(a, c)
+    assert 0 <= a.min() and a.max() <= 1
+
+
+def test_synthetic_scene_disparity_is_the_view_to_view_shift():
+    """Each pixel of the centre view moves by its ground-truth disparity between views.
+
+    Shift view (v, u + 1) back by d and compare with view (v, u) on the pixels
+    of each layer away from occlusion edges.
+    """
+    # integer disparities: every view samples the layer textures on the pixel grid
+    lf, disp = synthetic_scene((5, 5, 64, 64), n_layers=2, seed=1, disparity_range=(1.0, 2.0))
+    c = 2
+    for d in np.unique(disp):
+        # view u = c + 1 sees the point of view c at x + d: sample it there
+        moved = ndimage.shift(lf[c, c + 1], (0, -d), order=1, mode="nearest")
+        inner = ndimage.binary_erosion(disp == d, iterations=4)
+        inner[:, :4] = inner[:, -4:] = False
+        assert inner.sum() > 50
+        err = np.abs(moved - lf[c, c])[inner].mean()
+        assert err < 0.01, (d, err)
+        # and a wrong disparity does not fit
+        wrong = ndimage.shift(lf[c, c + 1], (0, -(d + 1.0)), order=1, mode="nearest")
+        assert np.abs(wrong - lf[c, c])[inner].mean() > 3 * err
+
+
+def test_synthetic_scene_occlusion_front_layer_wins():
+    lf, disp = synthetic_scene((3, 3, 48, 48), n_layers=2, seed=2)
+    assert set(np.unique(disp)) == {0.25, 1.5}  # both layers visible, near one in front somewhere
+
+
+def test_synthetic_scene_bad_input():
+    with pytest.raises(ValueError, match="shape"):
+        synthetic_scene((5, 5, 32))
+    with pytest.raises(ValueError, match="n_layers"):
+        synthetic_scene((5, 5, 8, 8), n_layers=0)
+
+
+def test_lytro_sample_is_the_crop_of_the_capture():
+    lf = lytro_sample()
+    assert lf.shape == (9, 9, 128, 128, 3) and lf.dtype == np.float32
+    if not LYTRO_DIR.is_dir():
+        pytest.skip("shared Lytro data not present")
+    import imageio.v3 as iio
+
+    for rr, cc in [(2, 2), (6, 9), (10, 10)]:
+        (f,) = LYTRO_DIR.glob(f"IMG_0001_*_{rr:02d}_{cc:02d}.png")
+        view = iio.imread(f)[64:192, 64:192, :3] / 255.0
+        np.testing.assert_allclose(lf[rr - 2, cc - 2], view, atol=1e-6)
+
+
+def test_epis_are_the_right_slices():
+    lf = np.arange(3 * 4 * 5 * 6, dtype=np.float32).reshape(3, 4, 5, 6)
+    h = horizontal_epi(lf, v=1, y=2)
+    v = vertical_epi(lf, u=3, x=4)
+    assert h.shape == (4, 6) and v.shape == (3, 5)
+    for u in range(4):
+        for x in range(6):
+            assert h[u, x] == lf[1, u, 2, x]
+    for vv in range(3):
+        for y in range(5):
+            assert v[vv, y] == lf[vv, 3, y, 4]
+    col = np.random.default_rng(0).random((3, 4, 5, 6, 3))
+    np.testing.assert_array_equal(horizontal_epi(col), col[1, :, 2, :])
+    with pytest.raises(ValueError, match="out of range"):
+        horizontal_epi(lf, v=3)
+    with pytest.raises(ValueError, match="integer"):
+        vertical_epi(lf, u=1.5)
+
+
+def test_bezier_positions_match_bernstein_formula():
+    cp = random_path(5, extent=3.0, z_extent=1.0, seed=0)
+    pos = bezier_positions(cp, 9)
+    for k in range(9):
+        np.testing.assert_allclose(pos[k], bezier_reference(cp, k / 8), atol=1e-12)
+    np.testing.assert_allclose(pos[0], cp[0])
+    np.testing.assert_allclose(pos[-1], cp[-1])
+
+
+def test_presets():
+    lin = linear_path(3.0, angle_deg=90)
+    np.testing.assert_allclose(lin, [[0, -1.5, 0], [0, 1.5, 0]], atol=1e-12)
+    for name in PRESETS:
+        cp = preset_path(name, extent=2.0, seed=1)
+        np.testing.assert_allclose(bezier_positions(cp, 32).mean(axis=0)[:2], 0.0, atol=1e-9)
+    np.testing.assert_allclose(center_path(arc_path() + 7.0), arc_path(), atol=1e-12)
+    with pytest.raises(ValueError, match="unknown path preset"):
+        preset_path("zigzag")
+
+
+def test_path_json_round_trip_and_no_overwrite(tmp_path):
+    cp = random_path(4, extent=2.0, z_extent=0.5, seed=2)
+    f = save_path_json(tmp_path / "p.json", cp, n_times=16)
+    np.testing.assert_array_equal(load_path_json(f), cp)
+    assert json.loads(f.read_text())["n_times"] == 16
+    with pytest.raises(FileExistsError):
+        save_path_json(f, cp)
+    save_path_json(f, cp * 2, overwrite=True)
+    np.testing.assert_array_equal(load_path_json(f), cp * 2)
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        load_path_json(tmp_path / "bad.json")
+    (tmp_path / "short.json").write_text('{"control_points": [[0, 0, 0]]}')
+    with pytest.raises(ValueError, match="at least 2"):
+        load_path_json(tmp_path / "short.json")
+    with pytest.raises(FileNotFoundError):
+        load_path_json(tmp_path / "missing.json")
