@@ -78,7 +78,6 @@ def _add_simulate(sub):
 def _run_simulate(args):
     from .blur import simulate_blur
     from .io import write_lightfield
-    from .path import save_path_json
 
     out = Path(args.output)
     if out.exists() and not args.overwrite:
@@ -88,11 +87,8 @@ def _run_simulate(args):
     blurred = simulate_blur(
         lf, cp, n_times=args.n_times, infinity_disparity=args.infinity_disparity, device=args.device
     )
-    write_lightfield(out, blurred, overwrite=args.overwrite)
-    path_file = out.with_name(out.stem + "_path.json")
-    save_path_json(path_file, cp, overwrite=True, n_times=args.n_times,
-                   infinity_disparity=args.infinity_disparity)
-    print(f"wrote {out} {blurred.shape} and its path {path_file}")
+    written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp)
+    print(f"wrote {written} {blurred.shape}, with its camera path beside it")
 
 
 # ------------------------------------------------------------------ demo
