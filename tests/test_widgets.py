@@ -300,6 +300,7 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     assert w.true_combo.currentText() == "b"  # the true path comes from the metadata
     w.points_spin.setValue(3)
     w.iter_spin.setValue(2)
+    w.tv_iter_spin.setValue(3)
     w.device_combo.setCurrentText("cpu")
     w.preview_spin.setValue(1)
     w.run()
@@ -323,6 +324,8 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     np.testing.assert_allclose(path.metadata["true_control_points"], cp_true)
     np.testing.assert_allclose(path.metadata["control_points"], cp)
     assert w.loss_plot.values  # the loss curve was drawn
+    assert w.preview_updates >= 1 and w.path_preview_updates >= 1  # live previews were shown (then removed)
+    assert meta["parameters"]["n_control_points"] == 3 and meta["parameters"]["tv_iter"] == 3
     np.testing.assert_array_equal(layer.data, before)
 
 
@@ -336,10 +339,9 @@ def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, not
     w.layer_combo.set_layer(layer)
     w.iter_spin.setValue(100000)
     w.device_combo.setCurrentText("cpu")
-    w.preview_spin.setValue(1)
     w.run()
-    # wait for the live preview (a layer) and the first loss values
-    qtbot.waitUntil(lambda: "b blind (preview)" in viewer.layers, timeout=TIMEOUT)
+    # wait for the live path preview (a layer)
+    qtbot.waitUntil(lambda: "b path (preview)" in viewer.layers, timeout=TIMEOUT)
     assert w.is_running
     w.cancel()
     qtbot.waitUntil(lambda: not w.is_running, timeout=10_000)

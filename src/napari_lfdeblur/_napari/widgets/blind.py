@@ -4,22 +4,23 @@ A thin shell over :func:`napari_lfdeblur.blind.iter_blind_deblur`, run in a
 napari ``thread_worker``. While it runs:
 
 - a progress bar with the time left (extrapolated from the fraction done);
-- a live preview: the layer ``'<source> blind (preview)'`` shows the
-  current light-field estimate whenever the solver sends one, and the path
-  plot shows the current path (with the true path, dashed, when the input
-  layer's metadata holds one, e.g. after *Simulate blur*);
+- a live preview: the layer ``'<source> path (preview)'`` and the path plot
+  show the current path (with the true path, dashed / cyan, when the input
+  layer's metadata holds one, e.g. after *Simulate blur*), redrawn at most
+  every 0.3 s; the layer ``'<source> blind (preview)'`` shows the current
+  light-field estimate whenever the solver sends one (every *preview every*
+  iterations of its final non-blind stage);
 - the loss curve.
 
-Cancel stops the solver at its next progress report (well under a second
-per iteration on small light fields), removes the preview layer and adds
-nothing. When it finishes, the preview is replaced by
+Cancel stops the solver at its next progress report (one path alternation
+or one TV iteration: well under a second on small light fields), removes
+the preview layers and adds nothing. When it finishes, the preview is replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
 timings, package version) and ``'<source> estimated path'``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
@@ -52,45 +53,27 @@ __all__ = ["BlindDeblurWidget"]
 #: seconds between redraws of the plots during a run
 REDRAW_INTERVAL = 0.3
 
-# field names that BlindParams may use for the widget's controls
-_POINTS_FIELDS = ("n_control_points", "n_points", "control_points_count")
-_ITER_FIELDS = ("n_iter", "n_iterations", "iterations", "n_outer")
-_PREVIEW_FIELDS = ("preview_every",)
-
 
 def _presets() -> list[str]:
-    from ... import blind
+    from ...blind import PRESETS
 
-    for name in ("PRESETS", "BLIND_PRESETS"):
-        value = getattr(blind, name, None)
-        if value:
-            return list(value)
-    names = getattr(blind.BlindParams, "preset_names", None)
-    if callable(names):
-        return list(names())
-    return ["default"]
+    return list(PRESETS)
 
 
-def _make_params(preset: str, **values):
-    """``BlindParams`` of a preset, with the widget's values on fields that exist."""
+def _iteration_field(params) -> str:
+    """The BlindParams field the *iterations* box sets: Adam steps ('joint') or alternations per level."""
+    return "n_iter" if params.method == "joint" else "n_outer"
+
+
+def _make_params(preset: str, *, n_points: int, n_iter: int, tv_iter: int, preview_every: int):
+    """``BlindParams`` of a preset with the widget's values."""
     from ...blind import BlindParams
 
-    make = getattr(BlindParams, "preset", None)
-    params = make(preset) if callable(make) else BlindParams()
-    names = {f.name for f in dataclasses.fields(params)}
-    changes = {}
-    for candidates, value in (
-        (_POINTS_FIELDS, values.get("n_points")),
-        (_ITER_FIELDS, values.get("n_iter")),
-        (_PREVIEW_FIELDS, values.get("preview_every")),
-    ):
-        if value is None:
-            continue
-        for key in candidates:
-            if key in names:
-                changes[key] = value
-                break
-    return dataclasses.replace(params, **changes) if changes else params
+    params = BlindParams.preset(preset)
+    return params.replace(
+        n_control_points=n_points, tv_iter=tv_iter, preview_every=preview_every,
+        **{_iteration_field(params): n_iter},
+    )
 
 
 class BlindDeblurWidget(SolverWidget):
@@ -103,17 +86,22 @@ class BlindDeblurWidget(SolverWidget):
         self.preset_combo = QComboBox()
         self.preset_combo.addItems(_presets())
         self.preset_combo.setToolTip("solver parameter preset (BlindParams.preset)")
-        self.points_spin = spin(3, 2, 12, "control points of the estimated Bezier path")
-        self.iter_spin = spin(30, 1, 100000, "iterations (see BlindParams)")
+        self.points_spin = spin(4, 2, 12, "control points of the estimated Bezier path")
+        self.iter_spin = spin(8, 1, 100000, "path iterations: alternations per pyramid level "
+                              "('default' preset) or joint Adam steps ('paper' preset)")
+        self.tv_iter_spin = spin(100, 0, 100000, "iterations of the final non-blind TV solve "
+                                 "(0: return the blurred input with the path)")
         self.device_combo = device_combo()
         self.seed_spin = spin(0, 0, 2**31 - 1, "random seed of the initial path")
         self.d_inf_spin = dspin(0.0, -20.0, 20.0, 0.1, 3, "infinity disparity d_inf, px/view")
-        self.preview_spin = spin(5, 0, 1000, "send a preview every N iterations (0: none)")
+        self.preview_spin = spin(10, 0, 1000, "preview the light field every N iterations of the "
+                                 "final solve (0: none); the path is previewed at every iteration")
         self.true_combo = LayerComboBox(napari_viewer, predicate=has_path, allow_none=True)
         self.true_combo.setToolTip("a layer holding the true path, to plot for comparison (optional)")
         self.form.addRow("preset", self.preset_combo)
         self.form.addRow("control points", self.points_spin)
-        self.form.addRow("iterations", self.iter_spin)
+        self.form.addRow("path iterations", self.iter_spin)
+        self.form.addRow("final TV iterations", self.tv_iter_spin)
         self.form.addRow("device", self.device_combo)
         self.form.addRow("seed", self.seed_spin)
         self.form.addRow("infinity disparity", self.d_inf_spin)
@@ -132,9 +120,25 @@ class BlindDeblurWidget(SolverWidget):
         self.after_layout.addWidget(self.epi)
 
         self.layer_combo.currentTextChanged.connect(self._input_changed)
+        self.preset_combo.currentTextChanged.connect(self._preset_changed)
+        self._preset_changed()
         self._input_changed()
         self._last_draw = 0.0
         self.preview_updates = 0
+        self.path_preview_updates = 0
+
+    def _preset_changed(self, *_):
+        """Show the preset's values in the boxes."""
+        from ...blind import BlindParams
+
+        try:
+            p = BlindParams.preset(self.preset_combo.currentText())
+        except ValueError:
+            return
+        self.points_spin.setValue(p.n_control_points)
+        self.iter_spin.setValue(getattr(p, _iteration_field(p)))
+        self.tv_iter_spin.setValue(p.tv_iter)
+        self.preview_spin.setValue(p.preview_every)
 
     def _input_changed(self, *_):
         layer = self.layer_combo.current_layer()
@@ -154,7 +158,12 @@ class BlindDeblurWidget(SolverWidget):
             return None
 
     def preview_name(self) -> str:
+        """Name of the light-field preview layer of the current run."""
         return f"{self._job['source']} blind (preview)" if getattr(self, "_job", None) else ""
+
+    def path_preview_name(self) -> str:
+        """Name of the path preview layer of the current run."""
+        return f"{self._job['source']} path (preview)" if getattr(self, "_job", None) else ""
 
     # ------------------------------------------------------------- job
     def make_job(self, layer, lf):
@@ -164,6 +173,7 @@ class BlindDeblurWidget(SolverWidget):
             self.preset_combo.currentText(),
             n_points=self.points_spin.value(),
             n_iter=self.iter_spin.value(),
+            tv_iter=self.tv_iter_spin.value(),
             preview_every=self.preview_spin.value(),
         )
         device = self.device_combo.currentText()
@@ -174,6 +184,7 @@ class BlindDeblurWidget(SolverWidget):
             "source": layer.name,
             "shape": lf.shape,
             "true": self.true_path(),
+            "n_times": params.n_times,
             "settings": {"preset": self.preset_combo.currentText(), "device": device,
                          "seed": seed, "infinity_disparity": d_inf},
         }
@@ -181,6 +192,7 @@ class BlindDeblurWidget(SolverWidget):
         self.plot.plot(None, self._job["true"])
         self._last_draw = 0.0
         self.preview_updates = 0
+        self.path_preview_updates = 0
         return lambda: gen
 
     def on_progress(self, progress) -> None:
@@ -197,10 +209,16 @@ class BlindDeblurWidget(SolverWidget):
             self.loss_plot.plot(self.loss_plot.values)
             if progress.control_points is not None:
                 self.plot.plot(progress.control_points, self._job["true"])
+                add_layer(self.viewer, path_layer_data(
+                    progress.control_points, self._job["shape"], n_times=self._job["n_times"],
+                    name=self.path_preview_name(), true_control_points=self._job["true"],
+                    metadata={"kind": "path preview"}))
+                self.path_preview_updates += 1
 
     def cleanup(self) -> None:
         if getattr(self, "_job", None):
             remove_layer(self.viewer, self.preview_name())
+            remove_layer(self.viewer, self.path_preview_name())
 
     def on_result(self, result) -> None:
         job = self._job
