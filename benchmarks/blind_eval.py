@@ -68,12 +68,26 @@ CROP = 8  # border pixels removed before PSNR / SSIM / angular error
 PATH_TIMES = 64  # instants for the path errors
 ALL_METHODS = ("default", "paper", "baseline2d")
 
-#: name -> (n_points, extent (box side, views), z_extent, seed) of random_path
+#: name -> (n_points, extent, z_ratio, seed): ``random_path(n_points, extent=1, z_extent=z_ratio,
+#: seed=seed)`` scaled so that its extent (the largest distance between two of its positions,
+#: z included, in views) is ``extent``
 PATHS = {
     "p1": (4, 2.0, 0.0, 101),
     "p2": (4, 3.0, 0.0, 102),
-    "p3": (4, 2.5, 1.0, 103),
+    "p3": (4, 2.5, 0.5, 103),
 }
+
+
+def true_path(name: str) -> np.ndarray:
+    """The true path of ``PATHS[name]``, in the zero-mean gauge for ``RENDER_TIMES`` instants."""
+    from napari_lfdeblur import bezier_positions, random_path
+    from napari_lfdeblur.path import center_path
+
+    n_points, extent, z_ratio, seed = PATHS[name]
+    cp = center_path(random_path(n_points, extent=1.0, z_extent=z_ratio, seed=seed), RENDER_TIMES)
+    pos = bezier_positions(cp, RENDER_TIMES)
+    diameter = np.sqrt(((pos[:, None] - pos[None]) ** 2).sum(-1)).max()
+    return cp * (extent / diameter)
 
 
 # ------------------------------------------------------------------ cases
@@ -107,14 +121,13 @@ def _scene(name: str, quick: bool):
 
 def make_case(name: str, quick: bool = False) -> Case:
     """Build the case ``<scene>-<path>`` (e.g. ``syn-p1``)."""
-    from napari_lfdeblur import random_path, simulate_blur
-    from napari_lfdeblur.path import center_path
+    from napari_lfdeblur import simulate_blur
 
     scene, _, pname = name.partition("-")
     if pname not in PATHS:
         raise ValueError(f"unknown case {name!r}: paths are {sorted(PATHS)}")
-    n_points, extent, z_extent, seed = PATHS[pname]
-    cp = center_path(random_path(n_points, extent=extent, z_extent=z_extent, seed=seed), RENDER_TIMES)
+    seed = PATHS[pname][3]
+    cp = true_path(pname)
     sharp = _scene(scene, quick)
     blurred = simulate_blur(sharp, cp, n_times=RENDER_TIMES, infinity_disparity=0.0)
     rng = np.random.default_rng(1000 + seed)
@@ -386,8 +399,9 @@ METHOD_TEXT = """\
 - **Cases.** `syn`: `synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=1)`,
   layered textured planes at disparities 0.25..1.5 px/view with occlusions. `lytro`: the real Lytro
   crop `lytro_sample()` (9×9×128×128×3; its content moves about 0.6 px/view). Each is blurred by three
-  fixed random Bézier paths (`random_path(4, extent, z_extent, seed)`: `p1` extent 2, `p2` extent 3,
-  `p3` extent 2.5 with z 1.0; seeds 101..103), rendered with **T = 128** instants — far more than a
+  fixed random cubic Bézier paths (`random_path(4, seed=101..103)`, scaled so that the largest distance
+  between two positions is 2 views for `p1`, 3 for `p2` and 2.5 for `p3`, which also moves in z),
+  rendered with **T = 128** instants — far more than a
   solver uses — with `d_inf = 0`, plus Gaussian noise σ = 0.002 (seeded), clipped to [0, 1].
 - **Ground truth.** The true path is moved to the zero-mean gauge for T = 128, so the ground-truth
   light field is the sharp one seen from the mean camera position (MODEL.md, "Gauge of results").

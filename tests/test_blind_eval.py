@@ -43,6 +43,10 @@ def test_case_ground_truth_is_in_the_zero_mean_gauge(blind_eval):
 
     case = blind_eval.make_case("syn-p3", quick=True)
     assert np.abs(bezier_positions(case.control_points, blind_eval.RENDER_TIMES).mean(0)).max() < 1e-12
+    pos = bezier_positions(case.control_points, 500)
+    diameter = np.sqrt(((pos[:, None] - pos[None]) ** 2).sum(-1)).max()
+    assert diameter == pytest.approx(blind_eval.PATHS["p3"][1], rel=1e-2)
+    assert np.ptp(pos[:, 2]) > 0.1  # p3 moves in z
     # the blurred input is the T=128 blur of the ground truth plus small noise
     clean = simulate_blur(case.sharp, case.control_points, n_times=blind_eval.RENDER_TIMES)
     resid = case.blurred - clean
