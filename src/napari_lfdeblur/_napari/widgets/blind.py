@@ -148,14 +148,24 @@ class BlindDeblurWidget(SolverWidget):
                 self.d_inf_spin.setValue(float(layer.metadata["infinity_disparity"]))
 
     def true_path(self):
-        """The chosen true path, or None."""
+        """The chosen true path, or None.
+
+        It is moved to the zero-mean gauge and the canonical time direction of
+        the blind estimates, so that the two can be compared by eye (the blur
+        does not depend on either, MODEL.md "Ambiguities").
+        """
+        from ...blind import canonical_time_direction
+        from ...path import center_path
+
         layer = self.true_combo.current_layer()
         if layer is None:
             return None
         try:
-            return control_points_from_layer(layer)
+            cp = control_points_from_layer(layer)
         except LayerError:
             return None
+        n_times = int(layer.metadata.get("n_times", 32))
+        return canonical_time_direction(center_path(cp, n_times))
 
     def preview_name(self) -> str:
         """Name of the light-field preview layer of the current run."""
