@@ -358,15 +358,26 @@ def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
                     k: _mean(sel, k)
                     for k in ("psnr", "gain", "ssim", "angular", "blur_mismatch", "chamfer", "rmse_relative", "seconds", "peak_mib")
                 },
+                "seconds_max": max((r["seconds"] for r in sel if "seconds" in r), default=None),
             }
         )
     return out
 
 
-def targets(means: list[dict], quick: bool) -> list[str]:
-    """The issue's CPU targets, checked against the measured means (never assumed)."""
+def _paired(rows, a, b, key):
+    """Means of ``key`` for methods ``a`` and ``b`` over the cases where both gave a value."""
+    va = {r["case"]: r.get(key) for r in rows if r["method"] == a}
+    vb = {r["case"]: r.get(key) for r in rows if r["method"] == b}
+    common = [c for c in va if c in vb and va[c] is not None and vb[c] is not None]
+    if not common:
+        return None
+    return float(np.mean([va[c] for c in common])), float(np.mean([vb[c] for c in common])), len(common)
+
+
+def targets(means: list[dict], quick: bool, rows: list[dict] | None = None) -> list[str]:
+    """The issue's CPU targets, checked against the measured figures (never assumed)."""
     by = {r["method"]: r for r in means}
-    d, b = by.get("default"), by.get("baseline2d")
+    d = by.get("default")
     if d is None:
         return ["- `default` did not run: no target can be checked."]
     lines = []
@@ -374,18 +385,27 @@ def targets(means: list[dict], quick: bool) -> list[str]:
     def check(ok, text):
         lines.append(f"- {'met' if ok else '**not met**'}: {text}")
 
-    if d.get("seconds") is not None:
-        check(d["seconds"] <= 60, f"time per light field ≤ 60 s (mean {d['seconds']:.1f} s)")
+    if d.get("seconds_max") is not None:
+        check(
+            d["seconds_max"] <= 60,
+            f"≤ 60 s per light field (slowest {d['seconds_max']:.1f} s, mean {d['seconds']:.1f} s)",
+        )
     if d.get("gain") is not None:
         check(d["gain"] >= 4.0, f"mean PSNR gain ≥ +4 dB (mean {d['gain']:+.2f} dB)")
     if d.get("blur_mismatch") is not None:
         check(d["blur_mismatch"] <= 0.2, f"mean blur mismatch ≤ 0.2 (mean {d['blur_mismatch']:.3f})")
-    if b is not None and d.get("psnr") is not None and b.get("psnr") is not None:
-        check(d["psnr"] > b["psnr"], f"PSNR above the per-view 2D baseline ({d['psnr']:.2f} vs {b['psnr']:.2f} dB)")
-        check(
-            d["angular"] < b["angular"],
-            f"angular error below the per-view 2D baseline ({d['angular']:.4f} vs {b['angular']:.4f})",
-        )
+    for key, label, better, spec in (
+        ("psnr", "PSNR above", np.greater, ".2f"),
+        ("angular", "angular error below", np.less, ".4f"),
+    ):
+        pair = _paired(rows or [], "default", "baseline2d", key)
+        if pair is not None:
+            x, y, n = pair
+            check(
+                bool(better(x, y)),
+                f"{label} the per-view 2D baseline (means over {n} common cases: "
+                f"{format(x, spec)} vs {format(y, spec)})",
+            )
     if quick:
         lines.append("- (quick run: tiny sizes, the targets do not apply)")
     return lines
@@ -448,7 +468,7 @@ def render(rows, means, methods, skipped, args, env) -> str:
         "",
         "## Targets (issue 6, CPU)",
         "",
-        *targets(means, args.quick),
+        *targets(means, args.quick, rows),
         "",
     ]
     if skipped:
@@ -460,6 +480,8 @@ def render(rows, means, methods, skipped, args, env) -> str:
         lines += ["## Failures", ""]
         lines += [f"- `{r['method']}` on `{r['case']}`: {r['error']}" for r in errors]
         lines += [""]
+    if args.cases_for:
+        lines += ["Methods run on a subset of the cases: " + "; ".join(f"`{c}`" for c in args.cases_for) + ".", ""]
     lines += ["## Per case", "", *_table([r for r in rows if "error" not in r]), ""]
     lines += [METHOD_TEXT.format(crop=2 if args.quick else CROP)]
     return "\n".join(lines)
@@ -473,6 +495,13 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="tiny sizes, one case: a smoke run")
     ap.add_argument("--cases", help="comma-separated case names, e.g. syn-p1,lytro-p3 (default: all)")
     ap.add_argument("--methods", default=",".join(ALL_METHODS), help=f"comma-separated, from {ALL_METHODS}")
+    ap.add_argument(
+        "--cases-for",
+        action="append",
+        default=[],
+        metavar="METHOD=CASE,CASE",
+        help="run METHOD only on these cases (e.g. a slow preset on a subset); repeatable",
+    )
     ap.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
     ap.add_argument(
         "--output",
@@ -487,6 +516,12 @@ def main(argv=None) -> int:
         ap.error(f"unknown method(s) {bad}; choose from {ALL_METHODS}")
     names = [c.strip() for c in args.cases.split(",")] if args.cases else case_names(args.quick)
     output = Path(args.output) if args.output else (None if args.quick else DEFAULT_OUTPUT)
+    only = {}
+    for spec in args.cases_for:
+        method, sep, cases = spec.partition("=")
+        if not sep or method not in methods:
+            ap.error(f"--cases-for wants METHOD=CASE,CASE with a METHOD from --methods; got {spec!r}")
+        only[method] = [c.strip() for c in cases.split(",") if c.strip()]
 
     import torch
 
@@ -519,6 +554,8 @@ def main(argv=None) -> int:
         rows.append(inp)
         print(f"[case] {name}: shape {case.sharp.shape}, input PSNR {inp['psnr']:.2f} dB", file=sys.stderr)
         for m in run:
+            if m in only and name not in only[m]:
+                continue
             try:
                 row = evaluate(case, m, device, args.quick)
                 row["gain"] = row["psnr"] - inp["psnr"]

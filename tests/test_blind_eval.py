@@ -56,15 +56,19 @@ def test_case_ground_truth_is_in_the_zero_mean_gauge(blind_eval):
 
 
 def test_targets_are_checked_not_assumed(blind_eval):
-    means = [
-        {"method": "default", "seconds": 50.0, "gain": 4.5, "blur_mismatch": 0.25, "psnr": 30.0, "angular": 0.01},
-        {"method": "baseline2d", "psnr": 31.0, "angular": 0.02},
+    rows = [
+        {"case": "a", "method": "default", "psnr": 30.0, "angular": 0.01},
+        {"case": "b", "method": "default", "psnr": 30.0, "angular": 0.01},
+        {"case": "a", "method": "baseline2d", "psnr": 31.0, "angular": 0.02},
+        {"case": "c", "method": "baseline2d", "psnr": 10.0, "angular": 0.00},  # not paired
     ]
-    lines = blind_eval.targets(means, quick=False)
+    means = [{"method": "default", "seconds": 50.0, "seconds_max": 70.0, "gain": 4.5, "blur_mismatch": 0.15}]
+    lines = blind_eval.targets(means, quick=False, rows=rows)
     met = [line for line in lines if line.startswith("- met")]
     unmet = [line for line in lines if line.startswith("- **not met**")]
     assert len(met) == 3 and len(unmet) == 2
-    assert any("blur mismatch" in line for line in unmet) and any("PSNR above" in line for line in unmet)
+    assert any("60 s" in line for line in unmet) and any("PSNR above" in line for line in unmet)
+    assert any("angular" in line and "over 1 common" in line for line in met)
     assert "did not run" in blind_eval.targets([], quick=False)[0]
 
 
