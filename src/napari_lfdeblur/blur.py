@@ -317,28 +317,26 @@ class _TapBlur(torch.autograd.Function):
 # ------------------------------------------------------ spatial resample
 
 
-def _spatial_resample(L, s_u_k, s_v_k, d_inf):
-    """Resample ``y`` at ``y + d_inf s_v(y)`` and ``x`` at ``x + d_inf s_u(x)`` (one instant)."""
-    V, U, Y, X, C = L.shape
-    ys = torch.arange(Y, dtype=s_v_k.dtype, device=L.device)
-    xs = torch.arange(X, dtype=s_u_k.dtype, device=L.device)
+def _spatial_taps(shape, s_u_k, s_v_k, d_inf, dtype):
+    """Taps of the spatial resampling at ``y + d_inf s_v(y)``, ``x + d_inf s_u(x)`` (one instant)."""
+    Y, X = shape[2], shape[3]
+    ys = torch.arange(Y, dtype=s_v_k.dtype, device=s_v_k.device)
+    xs = torch.arange(X, dtype=s_u_k.dtype, device=s_u_k.device)
     y0, y1, wy = _lerp_taps(ys + d_inf * s_v_k, Y)
     x0, x1, wx = _lerp_taps(xs + d_inf * s_u_k, X)
-    wy = wy.to(L.dtype)[None, None, :, None, None]
-    wx = wx.to(L.dtype)[None, None, None, :, None]
+    return y0, y1, wy.to(dtype)[None, None, :, None, None], x0, x1, wx.to(dtype)[None, None, None, :, None]
+
+
+def _spatial_resample(L, s_u_k, s_v_k, d_inf):
+    """Resample ``y`` at ``y + d_inf s_v(y)`` and ``x`` at ``x + d_inf s_u(x)`` (one instant)."""
+    y0, y1, wy, x0, x1, wx = _spatial_taps(L.shape, s_u_k, s_v_k, d_inf, L.dtype)
     Ly = L.index_select(2, y0) * (1 - wy) + L.index_select(2, y1) * wy
     return Ly.index_select(3, x0) * (1 - wx) + Ly.index_select(3, x1) * wx
 
 
 def _spatial_resample_adjoint(G, s_u_k, s_v_k, d_inf):
     """Adjoint of :func:`_spatial_resample` (scatter-add of the taps)."""
-    V, U, Y, X, C = G.shape
-    ys = torch.arange(Y, dtype=s_v_k.dtype, device=G.device)
-    xs = torch.arange(X, dtype=s_u_k.dtype, device=G.device)
-    y0, y1, wy = _lerp_taps(ys + d_inf * s_v_k, Y)
-    x0, x1, wx = _lerp_taps(xs + d_inf * s_u_k, X)
-    wy = wy.to(G.dtype)[None, None, :, None, None]
-    wx = wx.to(G.dtype)[None, None, None, :, None]
+    y0, y1, wy, x0, x1, wx = _spatial_taps(G.shape, s_u_k, s_v_k, d_inf, G.dtype)
     Gx = torch.zeros_like(G)
     Gx.index_add_(3, x0, G * (1 - wx))
     Gx.index_add_(3, x1, G * wx)
