@@ -46,6 +46,27 @@ def _wait_done(qtbot, widget):
     qtbot.waitUntil(lambda: not widget.is_running, timeout=TIMEOUT)
 
 
+# ------------------------------------------------------------ manifest
+
+
+@pytest.mark.parametrize(
+    "display_name, cls_name",
+    [("Simulate blur", "SimulateBlurWidget"), ("4D deconvolution", "DeconvolveWidget"),
+     ("Blind deblur", "BlindDeblurWidget"), ("Epipolar images", "EpiWidget")],
+)
+def test_widgets_open_from_the_plugin_menu(make_napari_viewer, display_name, cls_name):
+    viewer = make_napari_viewer()
+    dock, widget = viewer.window.add_plugin_dock_widget("napari-lfdeblur", display_name)
+    assert type(widget).__name__ == cls_name
+    # napari hands plugins a public-only proxy of the viewer: the widget must work through it
+    viewer.add_image(np.zeros((3, 3, 8, 8), np.float32), name="lf")
+    combo = widget.epi.layer_combo if cls_name == "EpiWidget" else widget.layer_combo
+    assert combo.current_layer() is not None and combo.currentText() == "lf"
+    if cls_name == "SimulateBlurWidget":
+        widget.n_times_spin.setValue(4)
+        assert [layer.name for layer in widget.run_and_wait(timeout=30)] == ["lf blurred", "lf blurred path"]
+
+
 # ------------------------------------------------------------ simulate
 
 

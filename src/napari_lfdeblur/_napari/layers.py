@@ -57,6 +57,7 @@ from ..path import bezier_positions, validate_control_points
 __all__ = [
     "LF_AXIS_LABELS",
     "LayerError",
+    "layer_kind",
     "lightfield_from_layer",
     "lightfield_layer_data",
     "lightfield_metadata",
@@ -84,6 +85,18 @@ class LayerError(ValueError):
 # ------------------------------------------------------------ light field
 
 
+def layer_kind(layer) -> str | None:
+    """``'image'``, ``'shapes'``, ... for a napari layer (works through napari's
+    public-only proxies, which forbid private attributes), None for anything else."""
+    from napari import layers
+
+    for cls in (layers.Image, layers.Shapes, layers.Labels, layers.Points, layers.Vectors, layers.Surface,
+                layers.Tracks):
+        if isinstance(layer, cls):
+            return cls.__name__.lower()
+    return None
+
+
 def lightfield_from_layer(layer) -> np.ndarray:
     """A float32 copy of a layer's light field, ``(V, U, Y, X[, C])`` in [0, 1].
 
@@ -106,7 +119,7 @@ def lightfield_from_layer(layer) -> np.ndarray:
     """
     if layer is None:
         raise LayerError("no light-field layer selected: open or choose a 4D image layer first")
-    if getattr(layer, "_type_string", None) != "image":
+    if layer_kind(layer) != "image":
         raise LayerError(f"layer {layer.name!r} is not an Image layer")
     if getattr(layer, "multiscale", False):
         raise LayerError(f"layer {layer.name!r} is multiscale; a plain 4D array is needed")
@@ -371,7 +384,7 @@ def add_layer(viewer, layer_data, *, replace: bool = True):
     name = kwargs.get("name")
     if replace and name in viewer.layers:
         layer = viewer.layers[name]
-        if layer._type_string == layer_type and _compatible(layer, data, kwargs):
+        if layer_kind(layer) == layer_type and _compatible(layer, data, kwargs):
             if layer_type == "shapes":
                 layer.data = []
                 layer.add(data, shape_type=kwargs["shape_type"],
@@ -390,7 +403,7 @@ def add_layer(viewer, layer_data, *, replace: bool = True):
 
 
 def _compatible(layer, data, kwargs) -> bool:
-    if layer._type_string == "shapes":
+    if layer_kind(layer) == "shapes":
         return True
     arr = np.asarray(data)
     return arr.ndim == layer.data.ndim and bool(getattr(layer, "rgb", False)) == bool(kwargs.get("rgb", False))

@@ -44,6 +44,7 @@ from ..layers import (
     LayerError,
     add_layer,
     epi_layer_data,
+    layer_kind,
     lightfield_from_layer,
     remove_layer,
 )
@@ -173,7 +174,7 @@ class LayerComboBox(QComboBox):
 
 
 def is_image(layer) -> bool:
-    return getattr(layer, "_type_string", None) == "image"
+    return layer_kind(layer) == "image"
 
 
 def has_path(layer) -> bool:
