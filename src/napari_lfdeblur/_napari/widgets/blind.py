@@ -13,7 +13,8 @@ napari ``thread_worker``. While it runs:
 - the loss curve.
 
 Cancel stops the solver at its next progress report (one path alternation
-or one TV iteration: well under a second on small light fields), removes
+or one TV iteration later: under a second on small light fields, a few
+seconds at the finest level of a 9x9x128x128 light field on a CPU), removes
 the preview layers and adds nothing. When it finishes, the preview is replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
 timings, package version) and ``'<source> estimated path'``.
