@@ -166,6 +166,24 @@ def test_2d_layer_and_empty_selection_notify(make_napari_viewer, notifications):
     assert len(viewer.layers) == 1
 
 
+def test_errors_reach_napari_notifications(make_napari_viewer):
+    """Without the test fixture's patch, an empty selection is a real napari error notification."""
+    from napari.utils.notifications import NotificationSeverity, notification_manager
+
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+
+    viewer = make_napari_viewer()
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    seen = []
+    notification_manager.notification_ready.connect(seen.append)
+    try:
+        assert w.run() is None
+    finally:
+        notification_manager.notification_ready.disconnect(seen.append)
+    assert [n.severity for n in seen] == [NotificationSeverity.ERROR]
+    assert "no light-field layer" in seen[0].message
+
+
 def test_bad_table_entry_notifies(make_napari_viewer, lf, notifications):
     from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
 
