@@ -41,12 +41,13 @@ def test_circular_convolution_matches_scipy():
     np.testing.assert_allclose(conv2_circular(x, k), ndimage.convolve(x, k, mode="wrap"), atol=1e-12)
 
 
-def test_blind_deconv_recovers_a_line_kernel_and_sharpens():
+@pytest.mark.parametrize("final", ["wiener", "tv"])
+def test_blind_deconv_recovers_a_line_kernel_and_sharpens(final):
     img = transform.resize(data.camera().astype(float) / 255, (96, 96), anti_aliasing=True)
     k_true = _line_kernel()
     blurred = ndimage.convolve(img, k_true, mode="nearest")
     blurred += np.random.default_rng(1).normal(0, 0.002, img.shape)
-    restored, k = blind_deconv_2d(blurred)
+    restored, k = blind_deconv_2d(blurred, Baseline2DParams(final=final))
     assert restored.shape == img.shape and restored.dtype == np.float32
     # sharper than the input by a clear margin
     assert psnr(restored, img, crop=6) > psnr(blurred, img, crop=6) + 2.0
@@ -78,6 +79,8 @@ def test_deblur_views_handles_colour_light_fields_view_by_view():
 def test_bad_input():
     with pytest.raises(ValueError, match="odd"):
         Baseline2DParams(kernel_size=4)
+    with pytest.raises(ValueError, match="final"):
+        Baseline2DParams(final="lucy")
     with pytest.raises(ValueError, match="image"):
         blind_deconv_2d(np.zeros((2, 3, 4, 5)))
     with pytest.raises(ValueError, match="twice the kernel"):
