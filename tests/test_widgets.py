@@ -300,18 +300,20 @@ def test_epi_pick_by_clicking(make_napari_viewer, lf):
     from napari_lfdeblur._napari.widgets._common import EpiWidget
 
     viewer = make_napari_viewer()
-    layer = viewer.add_image(lf, name="lf")
+    viewer.add_image(lf, name="lf")
     w = EpiWidget(viewer)
     viewer.window.add_dock_widget(w)
     w.epi.layer_combo.set_layer("lf")
     w.epi.click_box.setChecked(True)
-    callback = layer.mouse_drag_callbacks[-1]
-    callback(layer, SimpleNamespace(position=(1.0, 3.0, 5.2, 9.7)))  # (v, u, y, x) world coordinates
+    callback = viewer.mouse_drag_callbacks[-1]
+    callback(viewer, SimpleNamespace(position=(1.0, 3.0, 5.2, 9.7)))  # (v, u, y, x) world coordinates
     assert (w.epi.v_spin.value(), w.epi.u_spin.value(), w.epi.y_spin.value(), w.epi.x_spin.value()) == (1, 3, 5, 10)
     np.testing.assert_array_equal(viewer.layers["lf EPI h"].data, lf[1, :, 5, :])
     np.testing.assert_array_equal(viewer.layers["lf EPI v"].data, lf[:, 3, :, 10].T)
+    callback(viewer, SimpleNamespace(position=(1.0, 3.0, 40.0, 9.0)))  # outside the image: ignored
+    assert w.epi.y_spin.value() == 5
     w.epi.click_box.setChecked(False)
-    assert callback not in layer.mouse_drag_callbacks
+    assert callback not in viewer.mouse_drag_callbacks
 
 
 # --------------------------------------------------------------- blind

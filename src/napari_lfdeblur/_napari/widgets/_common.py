@@ -417,8 +417,9 @@ class EpiPanel(QGroupBox):
     The horizontal EPI is ``lf[v, :, y, :]`` and the vertical one
     ``lf[:, u, :, x]`` (see :mod:`napari_lfdeblur._napari.layers` for their
     placement). Once shown, they follow the spin boxes; with *pick by
-    clicking* on, a click on the light field sets ``y``, ``x`` from the click
-    and ``v``, ``u`` from the view sliders.
+    clicking* on, a click on the canvas (whichever layer is selected) sets
+    ``y``, ``x`` from the click and ``v``, ``u`` from the view sliders;
+    clicks outside the light field (e.g. on an EPI) are ignored.
     """
 
     def __init__(self, viewer, parent=None):
@@ -431,7 +432,7 @@ class EpiPanel(QGroupBox):
         self.x_spin = spin(0, 0, 0, "pixel column x of the vertical EPI")
         self.show_button = QPushButton("Show EPIs")
         self.click_box = QCheckBox("pick by clicking")
-        self.click_box.setToolTip("click on the light field to set y, x (and v, u from the view sliders)")
+        self.click_box.setToolTip("click on the canvas to set y, x from the click (and v, u from the view sliders)")
         form = QFormLayout(self)
         form.addRow("layer", self.layer_combo)
         row1 = QHBoxLayout()
@@ -444,7 +445,6 @@ class EpiPanel(QGroupBox):
         row2.addWidget(self.click_box)
         form.addRow(row2)
         self._active = False
-        self._clicked_layer = None
         self.layer_combo.currentTextChanged.connect(self._layer_changed)
         for box in (self.v_spin, self.y_spin, self.u_spin, self.x_spin):
             box.valueChanged.connect(self._pick_changed)
@@ -470,8 +470,6 @@ class EpiPanel(QGroupBox):
             box.setValue(n // 2)
             box.blockSignals(False)
         self._active = False
-        if self.click_box.isChecked():
-            self._toggle_click(True)
 
     def set_pick(self, v=None, y=None, u=None, x=None) -> None:
         """Set the picked rows/columns (updates the EPI layers once shown)."""
@@ -504,25 +502,24 @@ class EpiPanel(QGroupBox):
         return h, v
 
     def _toggle_click(self, on: bool):
-        if self._clicked_layer is not None:
-            try:
-                self._clicked_layer.mouse_drag_callbacks.remove(self._on_click)
-            except ValueError:
-                pass
-            self._clicked_layer = None
-        layer = self.layer_combo.current_layer()
-        if on and layer is not None:
-            layer.mouse_drag_callbacks.append(self._on_click)
-            self._clicked_layer = layer
+        """Listen (or stop listening) to clicks on the canvas, whichever layer is selected."""
+        callbacks = self._viewer.mouse_drag_callbacks
+        if on and self._on_click not in callbacks:
+            callbacks.append(self._on_click)
+        elif not on and self._on_click in callbacks:
+            callbacks.remove(self._on_click)
 
-    def _on_click(self, layer, event):
+    def _on_click(self, _viewer, event):
+        layer = self.layer_combo.current_layer()
+        if layer is None or not _is_lightfield(layer):
+            return
         coords = layer.world_to_data(event.position)
         if len(coords) < 4:
             return
         v, u, y, x = (int(round(c)) for c in coords[:4])
         shape = layer.data.shape
         if not (0 <= y < shape[2] and 0 <= x < shape[3]):
-            return
+            return  # a click outside the light field (e.g. on an EPI)
         self.set_pick(v=min(max(v, 0), shape[0] - 1), y=y, u=min(max(u, 0), shape[1] - 1), x=x)
         if not self._active:
             self.show_epis()
