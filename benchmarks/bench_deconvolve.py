@@ -1,0 +1,196 @@
+"""Time and peak memory of ``deconvolve`` on a full-size light field (9 x 9 x 376 x 541 x 3).
+
+Cases (``d_inf = 0``, T = 32):
+
+- ``inplane``: a linear in-plane path of 2 views, ``method='inplane'`` (one
+  exact per-pixel solve);
+- ``tv``: a linear path of 2 views with ``p_z`` from -0.5 to 0.5,
+  ``method='tv'`` with ``n_iter`` capped (``tol=0``, so every iteration runs);
+  per-iteration time is the mean over the iterations after the first.
+
+Every case runs in a fresh subprocess so that its peak memory is its own:
+on the CPU, the peak resident set size above the level after the input was
+made (sampled every 5 ms); on CUDA, ``torch.cuda.max_memory_allocated``
+(the input lives on the host; the solver's tensors on the GPU).
+
+Usage::
+
+    python benchmarks/bench_deconvolve.py                    # CPU, and CUDA when available
+    python benchmarks/bench_deconvolve.py --devices cuda --tv-iterations 50
+    python benchmarks/bench_deconvolve.py --quick            # small smoke run
+    python benchmarks/bench_deconvolve.py --write            # also write docs/benchmarks_deconvolve.md
+
+``--write`` replaces the rows of the devices measured in
+``docs/benchmarks_deconvolve.md`` and keeps the others, so CPU and GPU
+figures can be measured on different machines.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SHAPE = (9, 9, 376, 541, 3)
+DOC = ROOT / "docs" / "benchmarks_deconvolve.md"
+
+
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+class _PeakSampler:
+    def __init__(self):
+        self.peak = _rss_bytes()
+        self._stop = threading.Event()
+        self._t = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        while not self._stop.is_set():
+            self.peak = max(self.peak, _rss_bytes())
+            time.sleep(0.005)
+
+    def __enter__(self):
+        self._t.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._t.join()
+        self.peak = max(self.peak, _rss_bytes())
+
+
+def child(case: str, device: str, shape, tv_iterations: int) -> dict:
+    import numpy as np
+    import torch
+
+    from napari_lfdeblur import deconvolve, linear_path
+
+    rng = np.random.default_rng(0)
+    blurred = rng.random(shape, dtype=np.float32)
+    if case == "inplane":
+        cp, kw = linear_path(2.0, angle_deg=30.0), {"method": "inplane"}
+    else:
+        cp, kw = linear_path(2.0, angle_deg=30.0, z=1.0), {"method": "tv", "n_iter": tv_iterations, "tol": 0.0}
+    if device == "cuda":
+        torch.cuda.synchronize()
+        torch.cuda.reset_peak_memory_stats()
+    stamps = []
+
+    def cb(rec):
+        if device == "cuda":
+            torch.cuda.synchronize()
+        stamps.append(time.perf_counter())
+
+    base = _rss_bytes()
+    with _PeakSampler() as sampler:
+        t0 = time.perf_counter()
+        out = deconvolve(blurred, cp, device=device, callback=cb, **kw)
+        total = time.perf_counter() - t0
+    assert out.shape == blurred.shape
+    res = {
+        "case": case,
+        "device": device,
+        "device_name": torch.cuda.get_device_name() if device == "cuda" else platform.processor() or platform.machine(),
+        "threads": torch.get_num_threads(),
+        "shape": list(shape),
+        "iterations": len(stamps),
+        "total_s": total,
+        "rss_peak_above_input_gib": (sampler.peak - base) / 2**30,
+        "load_average": os.getloadavg()[0],
+    }
+    if len(stamps) > 1:
+        res["per_iteration_s"] = (stamps[-1] - stamps[0]) / (len(stamps) - 1)
+        res["first_iteration_s"] = stamps[0] - t0
+    if device == "cuda":
+        res["cuda_peak_gib"] = torch.cuda.max_memory_allocated() / 2**30
+    return res
+
+
+def _fmt(r: dict) -> str:
+    per = f"{r['per_iteration_s']:.2f}" if "per_iteration_s" in r else "-"
+    mem = f"{r['cuda_peak_gib']:.2f} (GPU)" if "cuda_peak_gib" in r else f"{r['rss_peak_above_input_gib']:.2f} (RSS)"
+    return (f"| {r['device']} ({r['device_name']}, {r['threads']} threads) | {r['case']} | "
+            f"{'x'.join(map(str, r['shape']))} | {r['iterations']} | {r['total_s']:.1f} | {per} | {mem} | "
+            f"{r.get('load_average', float('nan')):.1f} |")
+
+
+HEADER = [
+    "| device | method | shape | iterations | total (s) | per iteration (s) | peak memory (GiB) | load avg |",
+    "|---|---|---|---|---|---|---|---|",
+]
+
+
+def _write(results):
+    keep = []
+    measured = {r["device"] for r in results}
+    if DOC.exists():
+        for line in DOC.read_text().splitlines():
+            if line.startswith("| ") and not line.startswith("| device") and line.split(" ")[1] not in measured:
+                keep.append(line)
+    lines = [
+        "# deconvolve: time and peak memory",
+        "",
+        "Made by `python benchmarks/bench_deconvolve.py --write` (see its docstring). A random",
+        f"{'x'.join(map(str, SHAPE))} float32 light field (about {9*9*376*541*3*4/2**20:.0f} MiB), T = 32, d_inf = 0.",
+        "`inplane`: linear in-plane path of 2 views, one exact per-pixel solve. `tv`: linear path of 2 views",
+        "with p_z from -0.5 to 0.5, primal-dual 4D-TV iterations (capped; `tol=0`).",
+        "Peak memory: resident set size above the input's level on the CPU; `torch.cuda.max_memory_allocated` on a GPU.",
+        "Load avg: the machine's 1-minute load average when the case ended (other jobs inflate CPU times).",
+        "",
+        *HEADER,
+        *sorted(keep + [_fmt(r) for r in results]),
+        "",
+    ]
+    DOC.parent.mkdir(parents=True, exist_ok=True)
+    DOC.write_text("\n".join(lines))
+    print(f"wrote {DOC}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--devices", nargs="+", default=None, help="cpu and/or cuda (default: cpu, plus cuda if available)")
+    ap.add_argument("--cases", nargs="+", default=["inplane", "tv"])
+    ap.add_argument("--tv-iterations", type=int, default=None, help="TV iterations (default 2 on CPU, 50 on CUDA)")
+    ap.add_argument("--quick", action="store_true", help="a 5x5x64x64x3 light field, writes nothing")
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks_deconvolve.md")
+    ap.add_argument("--child", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    shape = (5, 5, 64, 64, 3) if args.quick else SHAPE
+    if args.child:
+        case, device, iters = args.child.split(":")
+        print("RESULT " + json.dumps(child(case, device, shape, int(iters))))
+        return None
+    if args.devices is None:
+        import torch
+
+        args.devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    results = []
+    print("\n".join(HEADER))
+    for device in args.devices:
+        for case in args.cases:
+            iters = args.tv_iterations or (50 if device == "cuda" else 2)
+            cmd = [sys.executable, __file__, "--child", f"{case}:{device}:{iters}"] + (["--quick"] if args.quick else [])
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+            line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+            if proc.returncode != 0 or not line:
+                print(f"| {device} | {case} | failed: {proc.stderr.strip().splitlines()[-1:]} |", flush=True)
+                continue
+            r = json.loads(line[0][7:])
+            results.append(r)
+            print(_fmt(r), flush=True)
+    if args.write and not args.quick and results:
+        _write(results)
+    return results
+
+
+if __name__ == "__main__":
+    main()
