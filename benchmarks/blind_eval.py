@@ -454,13 +454,22 @@ METHOD_TEXT = """\
 """
 
 
+def _loadavg() -> str:
+    try:
+        return "{:.1f}".format(os.getloadavg()[0])
+    except (AttributeError, OSError):
+        return "n/a"
+
+
 def render(rows, means, methods, skipped, args, env) -> str:
     lines = ["# Blind deblurring: evaluation against ground truth", ""]
     if args.quick:
         lines += ["**Quick smoke run at tiny sizes: not the benchmark.**", ""]
     lines += [
         f"Run on {env['machine']}, device `{env['device']}`, torch {env['torch']}, "
-        f"{env['threads']} torch threads, {env['date']}. Command: `{env['command']}`.",
+        f"{env['threads']} torch threads, {env['date']}. Command: `{env['command']}`. "
+        f"1-minute load average {env['load_start']} at the start and {env.get('load_end', 'n/a')} at the end "
+        "(other work on the machine slows the timings).",
         "",
         "## Summary (means over the cases)",
         "",
@@ -535,6 +544,7 @@ def main(argv=None) -> int:
         "threads": torch.get_num_threads(),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "command": "python benchmarks/blind_eval.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "load_start": _loadavg(),
     }
     if device.startswith("cuda"):
         env["machine"] += ", " + torch.cuda.get_device_name(0)
@@ -569,6 +579,7 @@ def main(argv=None) -> int:
             )
             print(f"    {m}: {msg}", file=sys.stderr)
 
+    env["load_end"] = _loadavg()
     means = summarise(rows, run)
     text = render(rows, means, methods, skipped, args, env)
     print(text)
