@@ -85,8 +85,8 @@ def test_tv_deconvolution_with_the_true_path_cuts_the_error(d_inf):
     lf, _ = synthetic_scene((5, 5, 24, 24), seed=2)
     cp = random_path(3, extent=2.5, z_extent=2.0, seed=3)
     noise = np.random.default_rng(0).normal(0, 0.005, lf.shape).astype(np.float32)
-    blurred = simulate_blur(lf, cp, n_times=16, infinity_disparity=d_inf) + noise
-    out = deconvolve(blurred, cp, n_times=16, infinity_disparity=d_inf, method="tv", device="cpu")
+    blurred = simulate_blur(lf, cp, n_times=8, infinity_disparity=d_inf) + noise
+    out = deconvolve(blurred, cp, n_times=8, infinity_disparity=d_inf, method="tv", device="cpu")
     # measured: about 0.50 of the blurred input's error (0.0053 vs 0.0100; 0.0058 vs 0.0115)
     assert rmse(out, lf) < 0.7 * rmse(blurred, lf)
     assert out.dtype == np.float32 and out.shape == lf.shape
