@@ -366,7 +366,9 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     true_shown = np.asarray(path.metadata["true_control_points"])
     assert np.allclose(true_shown, cp_true) or np.allclose(true_shown, cp_true[::-1])
     np.testing.assert_allclose(path.metadata["control_points"], cp)
-    assert w.loss_plot.values  # the loss curve was drawn
+    # the loss curve shows the path-estimation objective of every progress record
+    np.testing.assert_allclose(w.loss_plot.values, meta["loss_history"])
+    assert len(meta["loss_history"]) >= 2
     assert w.preview_updates >= 1 and w.path_preview_updates >= 1  # live previews were shown (then removed)
     assert meta["parameters"]["n_control_points"] == 3 and meta["parameters"]["tv_iter"] == 3
     np.testing.assert_array_equal(layer.data, before)

@@ -12,11 +12,12 @@ Light field
     ``rgb=True`` for colour (C = 3 or 4), ``axis_labels=('v', 'u', 'y', 'x')``.
     The view sliders are the two leading axes. ``metadata`` holds::
 
-        'napari_lfdeblur_version'    the package version that made it
-        'kind'                'blurred', 'deconvolved', 'blind', 'preview', ...
-        'parameters'          dict of the parameters of the operation
-        'control_points'      list of [p_x, p_y, p_z] (the path used / found)
+        'napari_lfdeblur_version'  the package version that made it
+        'kind'                     'blurred', 'deconvolved', 'blind', 'preview', ...
+        'parameters'               dict of the parameters of the operation
+        'control_points'           list of [p_x, p_y, p_z] (the path used / found)
         'n_times', 'infinity_disparity', 'source_layer'
+        'loss_history', 'timings'  (blind results)
 
 Epipolar images (EPIs)
     ``'<name> EPI h'``: the horizontal EPI ``lf[v, :, y, :]``, shape

@@ -314,7 +314,7 @@ class PathPlot(QWidget):
 
 
 class LossPlot(QWidget):
-    """The objective against iteration (log scale)."""
+    """The objective against iteration (log scale); dotted lines where a new stage starts."""
 
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -324,10 +324,15 @@ class LossPlot(QWidget):
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addWidget(self.canvas)
         self.values: list[float] = []
+        self.stage_starts: list[int] = []
+        self._stage = None
         self.plot([])
 
-    def plot(self, values) -> None:
+    def plot(self, values, stage_starts=None) -> None:
+        """Redraw with ``values`` (and stage boundaries, indices into ``values``)."""
         self.values = [float(v) for v in values]
+        if stage_starts is not None:
+            self.stage_starts = list(stage_starts)
         ax = self.ax
         ax.clear()
         vals = np.asarray(self.values, dtype=float)
@@ -336,13 +341,26 @@ class LossPlot(QWidget):
             ax.plot(np.nonzero(ok)[0] + 1, vals[ok], color="tab:purple", lw=1.2)
             if np.all(vals[ok] > 0):
                 ax.set_yscale("log")
-        ax.set_xlabel("iteration", fontsize=8)
+            for start in self.stage_starts:
+                if 0 < start < len(vals):
+                    ax.axvline(start + 0.5, color="0.6", ls=":", lw=0.8)
+        ax.set_xlabel("path iteration (dotted: new level / start)", fontsize=8)
         ax.set_ylabel("loss", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
         self.canvas.draw_idle()
 
-    def append(self, value: float) -> None:
+    def reset(self) -> None:
+        """Forget all values and stages."""
+        self._stage = None
+        self.plot([], [])
+
+    def append(self, value: float, stage=None) -> None:
+        """Add one value; a ``stage`` different from the previous one marks a boundary."""
+        if stage is not None and stage != self._stage:
+            if self._stage is not None:
+                self.stage_starts.append(len(self.values))
+            self._stage = stage
         self.values.append(float(value))
 
 

@@ -199,7 +199,7 @@ class BlindDeblurWidget(SolverWidget):
             "settings": {"preset": self.preset_combo.currentText(), "device": device,
                          "seed": seed, "infinity_disparity": d_inf},
         }
-        self.loss_plot.plot([])
+        self.loss_plot.reset()
         self.plot.plot(None, self._job["true"])
         self._last_draw = 0.0
         self.preview_updates = 0
@@ -207,8 +207,9 @@ class BlindDeblurWidget(SolverWidget):
         return lambda: gen
 
     def on_progress(self, progress) -> None:
-        if np.isfinite(progress.loss):
-            self.loss_plot.append(progress.loss)
+        if np.isfinite(progress.loss) and not progress.stage.startswith("final"):
+            # the path-estimation objective (the final TV stage has another one)
+            self.loss_plot.append(progress.loss, stage=progress.stage)
         if progress.preview is not None:
             data = lightfield_layer_data(progress.preview, name=self.preview_name(),
                                          metadata=lightfield_metadata(kind="preview"), opacity=1.0)
@@ -253,6 +254,8 @@ class BlindDeblurWidget(SolverWidget):
             true_control_points=job["true"]))
         self.last_layers = [out, path]
         self.plot.plot(cp, job["true"], n_times=max(64, n_times))
-        if meta["loss_history"]:
-            self.loss_plot.plot(meta["loss_history"])
+        if meta["loss_history"] and len(meta["loss_history"]) != len(self.loss_plot.values):
+            self.loss_plot.plot(meta["loss_history"], [])
+        else:
+            self.loss_plot.plot(self.loss_plot.values)
         self.epi.layer_combo.set_layer(out)
