@@ -412,3 +412,26 @@ def test_blind_unavailable_device_notifies(make_napari_viewer, lf, notifications
     assert w.run() is None
     assert notifications[-1][0] == "error" and "cuda" in notifications[-1][1]
     assert [layer.name for layer in viewer.layers] == ["b"]
+
+
+def test_blurred_sample_feeds_the_deconvolution_widget(make_napari_viewer, qtbot, notifications):
+    """The plugin's blurred sample carries its path; the widget picks it up and inverts it."""
+    from napari_lfdeblur._napari.sample_data import BLURRED_SAMPLE_PATH, synthetic_scene_sample
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+
+    viewer = make_napari_viewer()
+    viewer.open_sample("napari-lfdeblur", "synthetic_scene_blurred")
+    (layer,) = viewer.layers
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    np.testing.assert_allclose(w.table.control_points(), BLURRED_SAMPLE_PATH, atol=1e-5)
+    w.method_combo.setCurrentText("inplane")
+    w.weight_spin.setValue(0.0)
+    w.run()
+    _wait_done(qtbot, w)
+    assert not [n for n in notifications if n[0] == "error"], notifications
+    sharp = synthetic_scene_sample()[0][0]
+    out = viewer.layers[f"{layer.name} deconvolved"].data
+    assert out.shape == sharp.shape
+    # the exact in-plane inverse of the known path (up to the table's 6 digits) gives back the scene
+    assert np.abs(out - sharp).max() < 1e-3
