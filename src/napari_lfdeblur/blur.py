@@ -50,7 +50,7 @@ __all__ = [
 
 #: elements of temporary memory one block may use (float32: 4 bytes each): small
 #: enough to stay in a CPU cache; on a GPU large blocks mean fewer kernel launches
-DEFAULT_BLOCK_ELEMENTS = {"cpu": 1 << 19, "cuda": 1 << 26}
+DEFAULT_BLOCK_ELEMENTS = {"cpu": 1 << 19, "cuda": 1 << 24}
 
 
 # ----------------------------------------------------------------- arrays
