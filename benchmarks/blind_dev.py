@@ -1,0 +1,86 @@
+"""Development measurements of the blind solver (the official table is blind_eval.py).
+
+Usage::
+
+    python benchmarks/blind_dev.py [--cases syn-p1,lytro-p2] [--set key=value ...] [--oracle]
+        [--device cpu] [--preset default]
+
+Prints, per case: PSNR of blurred / restored (8 px borders cropped), blur mismatch,
+Chamfer distance, time; with ``--oracle`` also the non-blind restoration with the true path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _eval_module():
+    spec = importlib.util.spec_from_file_location("blind_eval", ROOT / "benchmarks" / "blind_eval.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["blind_eval"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _value(text):
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text.lower(), text)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--cases", default="syn-p1,syn-p2,syn-p3,lytro-p1,lytro-p2,lytro-p3")
+    ap.add_argument("--preset", default="default")
+    ap.add_argument("--set", nargs="*", default=[])
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--oracle", action="store_true")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    ev = _eval_module()
+    from napari_lfdeblur.blind import BlindParams, blind_deblur
+    from napari_lfdeblur.metrics import path_error, psnr
+
+    params = BlindParams.preset(args.preset)
+    if args.set:
+        params = params.replace(**{k: _value(v) for k, v in (s.split("=", 1) for s in args.set)})
+    rows = []
+    for name in args.cases.split(","):
+        case = ev.make_case(name)
+        t = time.perf_counter()
+        res = blind_deblur(case.blurred, params=params, device=args.device, seed=args.seed)
+        dt = time.perf_counter() - t
+        pe = path_error(res.control_points, case.control_points, lightfield=case.sharp)
+        p0 = psnr(case.blurred, case.sharp, crop=ev.CROP)
+        p1 = psnr(res.lightfield, case.sharp, crop=ev.CROP)
+        line = (f"{name:9s} blurred {p0:6.2f}  restored {p1:6.2f}  gain {p1 - p0:+6.2f}  "
+                f"mismatch {pe.blur_mismatch:5.3f}  chamfer {pe.chamfer:5.3f} (extent {pe.extent:4.2f})  "
+                f"time {dt:5.1f}s (path {res.timings['path']:.1f}s)")
+        if args.oracle:
+            from napari_lfdeblur.deconvolution import deconvolve
+
+            o = deconvolve(case.blurred, case.control_points, n_times=params.final_n_times, method="tv",
+                           weight=params.tv_weight, n_iter=params.tv_iter, tol=0.0, device=args.device)
+            line += f"  oracle {psnr(o, case.sharp, crop=ev.CROP) - p0:+6.2f}"
+        print(line, flush=True)
+        rows.append((p1 - p0, pe.blur_mismatch, dt))
+    a = np.array(rows)
+    print(f"MEAN gain {a[:, 0].mean():+.2f} dB  mismatch {a[:, 1].mean():.3f}  time {a[:, 2].mean():.1f}s")
+
+
+if __name__ == "__main__":
+    main()

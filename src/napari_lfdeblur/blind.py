@@ -1,0 +1,1122 @@
+"""Blind motion deblurring of light fields: the camera path and the sharp light field.
+
+:func:`blind_deblur` (and its generator form :func:`iter_blind_deblur`) takes a
+motion-blurred light field and returns both the sharp light field and the 3D
+camera path (MODEL.md units, zero-mean gauge), with no depth estimation.
+
+Two algorithms, chosen by :attr:`BlindParams.method`:
+
+``'alternating'`` (the ``default`` preset)
+    The plain joint MAP of the paper is trapped at "no blur" (FINDINGS.md,
+    section 1): the blurred light field itself has a lower sparse-gradient
+    prior than the sharp one. This method avoids the trap by design, in the
+    manner of Xu et al. (2013) and Pan et al. (2014):
+
+    1. the path is estimated on the grayscale light field, coarse to fine
+       over a spatial pyramid (views untouched; ``p_x, p_y`` are in views and
+       ``p_z`` in views per normalised ``x~``, so the path means the same at
+       every level, while ``d_inf`` in px/view scales with the level);
+    2. at each level the estimate alternates between
+       (a) a strongly sparsified, salient-edge latent light field: the L0
+       gradient-regularised solve ``min ||K_p l - f||^2 + lambda ||grad_yx l||_0``
+       by half-quadratic splitting (conjugate gradients for the quadratic
+       step), whose piecewise-constant result has step edges whatever the
+       current path, and
+       (b) the path fitted to that latent in the gradient domain,
+       ``min_p ||grad_yx(K_p l_s) - grad_yx f||^2``, by Adam;
+    3. the path starts from a few short linear paths in different
+       directions (never from the zero path, where its gradient vanishes in
+       the zero-mean gauge), scored on the coarsest level; its degree is
+       raised (exactly, by Bezier degree elevation) from a line to the
+       requested number of control points on the way up;
+    4. the zero-mean gauge holds throughout (the control points are
+       re-centred inside every step) and the path is kept in a box of the
+       aperture (FINDINGS.md, section 3);
+    5. the path found, each colour channel is restored by the 4D-TV
+       non-blind :func:`~napari_lfdeblur.deconvolution.deconvolve`.
+
+``'joint'`` (the ``paper`` preset)
+    The paper's blind stage as published: Adam on the control points and
+    the grayscale light field jointly, on ``mean((K_p l - f)^2) + w R_eps(l)``
+    with the 4D sparse-gradient prior ``R_eps = mean(min(|grad l|^2 / eps^2, 1))``
+    and ``w``, ``eps`` annealed; then the same TV non-blind stage.
+
+Both return the path time-canonicalised (:func:`canonical_time_direction`)
+since the blur does not depend on the order of the positions.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import warnings
+from dataclasses import asdict, dataclass, field, fields, replace
+
+import numpy as np
+import torch
+
+from ._progress import Progress, run_to_completion
+from .blur import BlurOperator, _lerp_taps, from_tensor, validate_lightfield
+from .devices import select_device
+from .path import bernstein_matrix, bezier_positions, center_path, validate_control_points
+
+__all__ = [
+    "BlindParams",
+    "BlindResult",
+    "PRESETS",
+    "blind_deblur",
+    "iter_blind_deblur",
+    "sparse_gradient_prior",
+    "estimate_blind_memory",
+    "canonical_time_direction",
+    "elevate_degree",
+    "plan_device",
+]
+
+METHODS = ("alternating", "joint")
+
+
+# ------------------------------------------------------------ parameters
+
+
+@dataclass(frozen=True)
+class BlindParams:
+    """Parameters of :func:`blind_deblur`. Frozen; save with :meth:`to_json`.
+
+    Attributes
+    ----------
+    method : {'alternating', 'joint'}
+        ``'alternating'``: salient-edge latent / path alternation, coarse to
+        fine (ours). ``'joint'``: the paper's joint Adam.
+    n_control_points : int
+        Control points of the estimated Bezier path (>= 2).
+    n_times : int
+        Exposure instants ``T`` of the model during path estimation (>= 2).
+    max_extent : float
+        Control points are kept within ``+-max_extent`` views of the centre
+        in ``x`` and ``y`` (and ``+-max_extent`` in ``p_z``); 0 means half
+        the angular aperture, ``(min(V, U) - 1) / 2``.
+    n_levels : int
+        Spatial pyramid levels of the alternating method (1 = full
+        resolution only). Levels smaller than ``min_size`` px are skipped.
+    min_size : int
+        Smallest spatial size of a pyramid level.
+    max_size : int
+        Largest spatial size (smaller side) used for the path estimation;
+        finer levels are skipped (0: up to full resolution). The path means
+        the same at every resolution, so this trades little accuracy for time.
+    n_outer : int
+        Maximum latent/path alternations per level.
+    n_restarts : int
+        Initial paths tried on the coarsest level (linear paths of length
+        ``init_length`` views in evenly spread directions), the best kept.
+    init_length : float
+        Length of the initial linear paths, in views.
+    l0_weight : float
+        ``lambda`` of the L0 gradient latent at the coarsest level.
+    l0_decay : float
+        ``lambda`` is multiplied by this after every alternation (floor
+        ``l0_weight * l0_floor``).
+    l0_floor : float
+    hqs_beta_max : float
+        Half-quadratic splitting runs ``beta = 2 lambda * kappa^k`` up to this.
+    hqs_kappa : float
+    n_cg : int
+        Conjugate-gradient iterations per splitting step.
+    path_lr : float
+        Adam step of the path (views).
+    path_steps : int
+        Adam steps on the path per alternation.
+    n_pixels : int
+        Pixels (chosen at random, favouring strong gradients, with all their
+        views) on which the path is fitted to the latent.
+    tiles : int
+        With ``p_z`` estimated, the fit takes the blur kernel constant over
+        ``tiles x tiles`` tiles of the image.
+    z_box : float
+        ``|p_z|`` is kept below ``z_box`` times the ``x, y`` box.
+    try_mirror : bool
+        Also try the mirrored path ``-p`` at every alternation (a local
+        minimum of the fit for curved paths), keeping the better.
+    estimate_z : bool
+        Estimate ``p_z`` (out-of-plane motion); False keeps the path in-plane.
+    z_levels : int
+        ``p_z`` is estimated on this many of the finest levels only (the
+        coarse levels fit the in-plane motion, which dominates).
+    path_tol : float
+        A level stops when the path moves less than this (views, largest
+        change of a sampled position) in two successive alternations.
+    n_iter : int
+        Iterations of the ``'joint'`` method.
+    lf_lr : float
+        Adam step of the light field (``'joint'``).
+    prior_weight, prior_decay, prior_floor : float
+        Weight of the sparse-gradient prior (``'joint'``), its decay per
+        iteration and its floor as a fraction of the start.
+    eps, eps_decay, eps_min : float
+        ``eps`` of the sparse-gradient prior (``'joint'``), its decay per
+        iteration and its floor.
+    tv_weight : float
+        Weight of the 4D TV of the final non-blind solve
+        (``1/2 ||K l - f||^2 + tv_weight TV4(l)``).
+    tv_iter : int
+        Iterations of the final non-blind solve (0: skip it and return the
+        blurred input as the light field).
+    final_n_times : int
+        Exposure instants of the final non-blind solve.
+    preview_every : int
+        Send a preview light field every so many progress records (0: never).
+    """
+
+    method: str = "alternating"
+    n_control_points: int = 4
+    n_times: int = 8
+    max_extent: float = 0.0
+    # alternating
+    n_levels: int = 1
+    min_size: int = 24
+    max_size: int = 0
+    n_outer: int = 8
+    n_restarts: int = 4
+    init_length: float = 1.0
+    l0_weight: float = 4e-3
+    l0_decay: float = 1.0
+    l0_floor: float = 0.3
+    hqs_beta_max: float = 2.0
+    hqs_kappa: float = 2.0
+    n_cg: int = 3
+    path_lr: float = 0.05
+    path_steps: int = 300
+    path_tol: float = 0.01
+    n_pixels: int = 3000
+    tiles: int = 4
+    z_box: float = 0.5
+    try_mirror: bool = True
+    estimate_z: bool = False
+    z_levels: int = 1
+    # joint (paper)
+    n_iter: int = 1000
+    lf_lr: float = 0.04
+    prior_weight: float = 8e-3
+    prior_decay: float = 0.997
+    prior_floor: float = 0.1
+    eps: float = 0.12
+    eps_decay: float = 0.997
+    eps_min: float = 0.04
+    # final non-blind stage
+    tv_weight: float = 0.001
+    tv_iter: int = 100
+    final_n_times: int = 16
+    preview_every: int = 10
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"unknown blind method {self.method!r}: choose one of {', '.join(METHODS)}")
+        ints = {
+            "n_control_points": 2, "n_times": 2, "n_levels": 1, "min_size": 4, "n_outer": 1,
+            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "z_levels": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
+            "final_n_times": 2, "preview_every": 0,
+        }
+        for name, lo in ints.items():
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                raise ValueError(f"BlindParams.{name} must be an integer >= {lo}; got {v!r}")
+            if v < lo:
+                raise ValueError(f"BlindParams.{name} must be >= {lo}; got {v}")
+            object.__setattr__(self, name, int(v))
+        nonneg = ("max_extent", "z_box", "init_length", "l0_weight", "l0_floor", "path_tol", "prior_weight",
+                  "prior_floor", "tv_weight", "eps_min")
+        positive = ("hqs_beta_max", "path_lr", "lf_lr", "eps", "l0_decay", "prior_decay", "eps_decay")
+        for name in nonneg + positive:
+            v = getattr(self, name)
+            if isinstance(v, bool):
+                raise ValueError(f"BlindParams.{name} must be a number; got {v!r}")
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                raise ValueError(f"BlindParams.{name} must be a number; got {v!r}") from None
+            if not math.isfinite(v) or v < 0 or (name in positive and v == 0):
+                kind = "> 0" if name in positive else ">= 0"
+                raise ValueError(f"BlindParams.{name} must be finite and {kind}; got {v!r}")
+            object.__setattr__(self, name, v)
+        object.__setattr__(self, "estimate_z", bool(self.estimate_z))
+        object.__setattr__(self, "try_mirror", bool(self.try_mirror))
+        if self.hqs_kappa <= 1:
+            raise ValueError(f"BlindParams.hqs_kappa must be > 1; got {self.hqs_kappa}")
+        for name in ("l0_decay", "prior_decay", "eps_decay"):
+            if getattr(self, name) > 1:
+                raise ValueError(f"BlindParams.{name} must be in (0, 1]; got {getattr(self, name)}")
+
+    # -- presets and (de)serialisation
+
+    @classmethod
+    def preset(cls, name: str) -> "BlindParams":
+        """The named preset: ``'default'`` (ours) or ``'paper'`` (the published settings)."""
+        try:
+            return PRESETS[name]
+        except (KeyError, TypeError):
+            raise ValueError(f"unknown blind preset {name!r}: choose one of {', '.join(PRESETS)}") from None
+
+    def replace(self, **changes) -> "BlindParams":
+        """A copy with some fields changed (checked like the constructor)."""
+        _check_keys(changes)
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        """The parameters as a plain dict."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "BlindParams":
+        """Parameters from a dict; missing keys take the default, unknown keys are an error."""
+        if not isinstance(d, dict):
+            raise ValueError(f"BlindParams.from_dict needs a dict; got {type(d).__name__}")
+        _check_keys(d)
+        return cls(**d)
+
+    def to_json(self) -> str:
+        """The parameters as a JSON text."""
+        return json.dumps(self.to_dict(), indent=2)
+
+    @classmethod
+    def from_json(cls, text: str) -> "BlindParams":
+        """Parameters from a JSON text written by :meth:`to_json`."""
+        try:
+            d = json.loads(text)
+        except (json.JSONDecodeError, TypeError) as exc:
+            raise ValueError(f"invalid JSON for BlindParams: {exc}") from None
+        return cls.from_dict(d)
+
+
+def _check_keys(d):
+    known = {f.name for f in fields(BlindParams)}
+    unknown = sorted(set(d) - known)
+    if unknown:
+        raise ValueError(
+            f"unknown blind parameter(s): {', '.join(map(str, unknown))}; known: {', '.join(sorted(known))}"
+        )
+
+
+#: named parameter sets
+PRESETS = {
+    "default": BlindParams(),
+    "paper": BlindParams(
+        method="joint",
+        n_control_points=4,
+        n_times=7,
+        n_iter=1000,
+        path_lr=1.0,
+        lf_lr=0.04,
+        prior_weight=8e-3,
+        prior_decay=0.997,
+        prior_floor=0.1,
+        eps=0.12,
+        eps_decay=0.997,
+        eps_min=0.04,
+        tv_weight=0.004,
+        tv_iter=100,
+        final_n_times=7,
+        preview_every=50,
+    ),
+}
+
+
+# ---------------------------------------------------------------- result
+
+
+@dataclass
+class BlindResult:
+    """The result of :func:`blind_deblur`.
+
+    Attributes
+    ----------
+    lightfield : ndarray, float32, the blurred input's shape
+        The sharp light field seen from the path's mean position.
+    control_points : ndarray, float64, shape (n, 3)
+        The camera path (MODEL.md units), zero-mean gauge for ``params.n_times``
+        (hence for any number of instants, up to sampling), time-canonicalised.
+    loss_history : list of float
+        The objective after every progress record of the path estimation.
+    params : BlindParams
+    timings : dict
+        Seconds spent per stage (``'path'``, ``'final'``, ``'total'``).
+    info : dict
+        Extra details (device used, restart scores, levels, ...).
+    """
+
+    lightfield: np.ndarray
+    control_points: np.ndarray
+    loss_history: list = field(default_factory=list)
+    params: BlindParams = field(default_factory=BlindParams)
+    timings: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------- priors
+
+
+def _grad_yx(L):
+    """Forward differences along y and x (Neumann: zero at the last sample)."""
+    gy = torch.zeros_like(L)
+    gx = torch.zeros_like(L)
+    gy[:, :, :-1] = L[:, :, 1:] - L[:, :, :-1]
+    gx[:, :, :, :-1] = L[:, :, :, 1:] - L[:, :, :, :-1]
+    return gy, gx
+
+
+def _grad_yx_diff(L):
+    """Differentiable version of :func:`_grad_yx` (no in-place writes)."""
+    gy = torch.nn.functional.pad(L[:, :, 1:] - L[:, :, :-1], (0, 0, 0, 0, 0, 1))
+    gx = torch.nn.functional.pad(L[:, :, :, 1:] - L[:, :, :, :-1], (0, 0, 0, 1))
+    return gy, gx
+
+
+def _div_yx(gy, gx):
+    """Negative adjoint of :func:`_grad_yx`."""
+    d = torch.zeros_like(gy)
+    d[:, :, :-1] += gy[:, :, :-1]
+    d[:, :, 1:] -= gy[:, :, :-1]
+    d[:, :, :, :-1] += gx[:, :, :, :-1]
+    d[:, :, :, 1:] -= gx[:, :, :, :-1]
+    return d
+
+
+def _grad4_diff(L):
+    out = []
+    for axis in range(4):
+        n = L.shape[axis]
+        d = L.narrow(axis, 1, n - 1) - L.narrow(axis, 0, n - 1) if n > 1 else None
+        if d is None:
+            out.append(torch.zeros_like(L))
+            continue
+        pad_shape = list(L.shape)
+        pad_shape[axis] = 1
+        out.append(torch.cat([d, torch.zeros(pad_shape, dtype=L.dtype, device=L.device)], dim=axis))
+    return out
+
+
+def sparse_gradient_prior(L: torch.Tensor, eps: float) -> torch.Tensor:
+    """The L0-approximating prior ``sum_a mean(min(|d_a L|^2 / eps^2, 1))`` over the 4 axes.
+
+    Parameters
+    ----------
+    L : torch.Tensor, shape (V, U, Y, X[, C])
+    eps : float
+        Gradients larger than ``eps`` cost 1 each; smaller ones quadratically less.
+
+    Returns
+    -------
+    torch.Tensor, scalar (differentiable)
+    """
+    if eps <= 0:
+        raise ValueError(f"eps must be > 0; got {eps}")
+    return sum(torch.clamp(g * g / (eps * eps), max=1.0).mean() for g in _grad4_diff(L))
+
+
+# ------------------------------------------------------------ path tools
+
+
+def elevate_degree(control_points: np.ndarray, n_points: int) -> np.ndarray:
+    """Raise the degree of a Bezier curve without changing it.
+
+    Parameters
+    ----------
+    control_points : ndarray, shape (n, 3)
+    n_points : int, >= n
+
+    Returns
+    -------
+    ndarray, float64, shape (n_points, 3), the same curve
+    """
+    cp = np.asarray(control_points, dtype=np.float64)
+    if n_points < len(cp):
+        raise ValueError(f"cannot lower a Bezier curve's degree: {len(cp)} -> {n_points} control points")
+    while len(cp) < n_points:
+        n = len(cp)  # degree n-1 -> n
+        new = np.empty((n + 1, cp.shape[1]))
+        new[0], new[n] = cp[0], cp[n - 1]
+        for i in range(1, n):
+            a = i / n
+            new[i] = a * cp[i - 1] + (1 - a) * cp[i]
+        cp = new
+    return cp
+
+
+def canonical_time_direction(control_points: np.ndarray) -> np.ndarray:
+    """Pick one of the two time directions of a path (the blur cannot tell them apart).
+
+    The path is reversed when the largest component (in magnitude) of
+    ``last - first`` control point is negative, so that the path moves
+    towards positive values along its main direction.
+
+    Returns
+    -------
+    ndarray, float64, shape (n, 3)
+    """
+    cp = np.asarray(control_points, dtype=np.float64)
+    d = cp[-1] - cp[0]
+    if d[np.argmax(np.abs(d))] < 0:
+        cp = cp[::-1].copy()
+    return cp
+
+
+class _PathParam:
+    """Free control points ``q`` mapped to centred, boxed control points."""
+
+    def __init__(self, cp0: np.ndarray, n_times: int, box: float, device, dtype=torch.float32,
+                 free_z: bool = True, z_box: float | None = None):
+        self.n_times = n_times
+        self.z_box = box if z_box is None else z_box
+        self.box = box
+        mean_row = bernstein_matrix(len(cp0), n_times).mean(axis=0)  # positions mean = mean_row @ cp
+        self.mean_row = torch.as_tensor(mean_row, dtype=dtype, device=device)
+        self.q = torch.as_tensor(np.asarray(cp0, dtype=np.float64), dtype=dtype, device=device).clone()
+        if not free_z:
+            with torch.no_grad():
+                self.q[:, 2] = 0.0
+        self.q.requires_grad_(True)
+        if not free_z:
+            mask = torch.tensor([1.0, 1.0, 0.0], dtype=dtype, device=device)
+            self.q.register_hook(lambda grad: grad * mask)
+
+    def control_points(self) -> torch.Tensor:
+        return self.q - self.mean_row @ self.q
+
+    @torch.no_grad()
+    def project(self):
+        """Re-centre and clamp into the box (in place)."""
+        self.q.sub_(self.mean_row @ self.q)
+        self.q[:, :2].clamp_(-self.box, self.box)
+        self.q[:, 2].clamp_(-self.z_box, self.z_box)
+        self.q.sub_(self.mean_row @ self.q)
+
+    def numpy(self) -> np.ndarray:
+        return self.control_points().detach().cpu().double().numpy()
+
+
+# ---------------------------------------------------------------- memory
+
+
+def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
+    """A rough upper estimate of the peak memory of :func:`blind_deblur`, in bytes.
+
+    Counts the light-field-sized float32 tensors alive at once in the final
+    (colour) TV stage and in the grayscale path stage, plus the blur
+    operator's blocks and interpolation tables.
+
+    Parameters
+    ----------
+    shape : tuple, (V, U, Y, X[, C])
+    params : BlindParams, optional
+
+    Returns
+    -------
+    int
+    """
+    p = params or BlindParams()
+    shape = tuple(int(s) for s in shape)
+    V, U, Y, X = shape[:4]
+    C = shape[4] if len(shape) == 5 else 1
+    n = V * U * Y * X
+    final = n * C * 4 * 12  # f, x, x_new, residual, gradient, 4 dual fields, temporaries
+    path = n * 4 * 16  # f, latent, CG vectors, gradients and autograd buffers (grayscale)
+    tables = 4 * max(p.n_times, p.final_n_times) * (X * U * U + Y * V * V) * 2
+    blocks = 4 * (1 << 22) * 3
+    return int(max(final, path) + tables + blocks + 64 * 2**20)
+
+
+def _free_memory(device: torch.device) -> int | None:
+    from . import devices
+
+    return devices.free_memory(device)
+
+
+# ------------------------------------------------------------ validation
+
+
+def _validate_input(blurred, infinity_disparity, n_control_points):
+    arr = validate_lightfield(blurred, "blurred light field")
+    V, U, Y, X = arr.shape[:4]
+    if V < 2 or U < 2:
+        raise ValueError(f"blind deblurring needs at least 2 x 2 views; got {V} x {U}")
+    if Y < 4 or X < 4:
+        raise ValueError(f"blind deblurring needs views of at least 4 x 4 pixels; got {Y} x {X}")
+    if isinstance(infinity_disparity, bool):
+        raise ValueError("infinity_disparity must be a number")
+    try:
+        d_inf = float(infinity_disparity)
+    except (TypeError, ValueError):
+        raise ValueError(f"infinity_disparity must be a number; got {infinity_disparity!r}") from None
+    if not math.isfinite(d_inf):
+        raise ValueError("infinity_disparity must be finite")
+    if n_control_points is not None:
+        if isinstance(n_control_points, bool) or not isinstance(n_control_points, (int, np.integer)) \
+                or n_control_points < 2:
+            raise ValueError(f"n_control_points must be an integer >= 2; got {n_control_points!r}")
+    return arr, d_inf
+
+
+def _make_params(params, overrides) -> BlindParams:
+    if params is None:
+        params = PRESETS["default"]
+    elif isinstance(params, str):
+        params = BlindParams.preset(params)
+    elif isinstance(params, dict):
+        params = BlindParams.from_dict(params)
+    elif not isinstance(params, BlindParams):
+        raise ValueError(f"params must be a BlindParams, a dict or a preset name; got {type(params).__name__}")
+    if overrides:
+        params = params.replace(**overrides)
+    return params
+
+
+# ------------------------------------------------------------ the solver
+
+
+def _gray(f: torch.Tensor) -> torch.Tensor:
+    return f.mean(dim=-1, keepdim=True)
+
+
+def _downsample(f: torch.Tensor, factor: int) -> torch.Tensor:
+    """Area-average the spatial axes by ``factor`` (views untouched)."""
+    if factor == 1:
+        return f
+    V, U, Y, X, C = f.shape
+    Yc, Xc = (Y // factor) * factor, (X // factor) * factor
+    g = f[:, :, :Yc, :Xc].reshape(V, U, Yc // factor, factor, Xc // factor, factor, C)
+    return g.mean(dim=(3, 5))
+
+
+def _cg(apply_A, b, x0, n_iter):
+    """Conjugate gradients for a symmetric positive (semi-)definite ``apply_A``."""
+    x = x0.clone()
+    r = b - apply_A(x)
+    p = r.clone()
+    rr = float((r * r).sum())
+    for _ in range(n_iter):
+        if rr <= 1e-20:
+            break
+        Ap = apply_A(p)
+        alpha = rr / max(float((p * Ap).sum()), 1e-30)
+        x.add_(p, alpha=alpha)
+        r.sub_(Ap, alpha=alpha)
+        rr_new = float((r * r).sum())
+        p.mul_(rr_new / rr).add_(r)
+        rr = rr_new
+    return x
+
+
+@torch.no_grad()
+def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0: torch.Tensor):
+    """Salient-edge latent: ``min ||K l - f||^2 + lam ||grad_yx l||_0`` by half-quadratic splitting."""
+    Ktf = op.adjoint(f)
+    x = x0
+    beta = 2.0 * lam
+    while True:
+        gy, gx = _grad_yx(x)
+        keep = (gy * gy + gx * gx) >= lam / beta
+        gy.mul_(keep)
+        gx.mul_(keep)
+        rhs = Ktf - beta * _div_yx(gy, gx)
+
+        def apply_A(z, beta=beta):
+            return op.adjoint(op.forward(z)) - beta * _div_yx(*_grad_yx(z))
+
+        x = _cg(apply_A, rhs, x, p.n_cg)
+        if beta >= p.hqs_beta_max:
+            break
+        beta = min(beta * p.hqs_kappa, p.hqs_beta_max)
+    return x
+
+
+def _subset_blur(L, ys, xs, positions, d_inf, full_shape):
+    """The blur of MODEL.md evaluated at a subset of pixels only.
+
+    Parameters
+    ----------
+    L : torch.Tensor, shape (V, U, Y, X, C) when ``d_inf != 0``, else (V, U, N, C)
+        The sharp light field (or, with ``d_inf = 0``, its samples at the N pixels).
+    ys, xs : torch.Tensor of int64, shape (N,)
+        The pixels.
+    positions : torch.Tensor, shape (T, 3)
+        Path positions at the instants (differentiable).
+    d_inf : float
+    full_shape : tuple, (V, U, Y, X, ...) of the whole light field (for ``x~, y~``)
+
+    Returns
+    -------
+    torch.Tensor, shape (V, U, N, C)
+        Equal to ``BlurOperator(...).forward(L)[:, :, ys, xs]``.
+    """
+    V, U, Y, X = full_shape[:4]
+    T = positions.shape[0]
+    dt = positions.dtype
+    C = L.shape[-1]
+    r = max(X, Y) / 2.0
+    xt = (xs.to(dt) - (X - 1) / 2.0) / r
+    yt = (ys.to(dt) - (Y - 1) / 2.0) / r
+    s_u = positions[None, :, 0] - xt[:, None] * positions[None, :, 2]  # (N, T)
+    s_v = positions[None, :, 1] - yt[:, None] * positions[None, :, 2]
+    N = ys.shape[0]
+    A = _interp_matrices(s_u, U).to(L.dtype)  # (N, T, U, U): output a reads a + s_u
+    Bm = _interp_matrices(s_v, V).to(L.dtype)  # (N, T, V, V)
+    if d_inf == 0.0:
+        # (N, C*V, U) @ (N, U, T*U) -> (N, C*V, T*U)
+        Ls = L.permute(2, 3, 0, 1).reshape(N, C * V, U)
+        tmp = torch.bmm(Ls, A.permute(0, 3, 1, 2).reshape(N, U, T * U))
+        tmp = tmp.reshape(N, C, V, T, U).permute(0, 3, 2, 1, 4)  # (N, T, V, C, U)
+    else:
+        y0, y1, wy = _lerp_taps(ys[:, None].to(dt) + d_inf * s_v, Y)
+        x0, x1, wx = _lerp_taps(xs[:, None].to(dt) + d_inf * s_u, X)
+        wy, wx = wy[..., None].to(L.dtype), wx[..., None].to(L.dtype)
+        Ls = ((L[:, :, y0, x0] * (1 - wx) + L[:, :, y0, x1] * wx) * (1 - wy)
+              + (L[:, :, y1, x0] * (1 - wx) + L[:, :, y1, x1] * wx) * wy)  # (V, U, N, T, C)
+        Ls = Ls.permute(2, 3, 4, 0, 1).reshape(N * T, C * V, U)
+        tmp = torch.bmm(Ls, A.reshape(N * T, U, U).transpose(1, 2))  # (N*T, C*V, U)
+        tmp = tmp.reshape(N, T, C, V, U).permute(0, 1, 3, 2, 4)  # (N, T, V, C, U)
+    # along v: (N*T, V, V) @ (N*T, V, C*U)
+    out = torch.bmm(Bm.reshape(N * T, V, V), tmp.reshape(N * T, V, C * U))
+    out = out.reshape(N, T, V, C, U).mean(dim=1)  # (N, V, C, U)
+    return out.permute(1, 3, 0, 2)
+
+
+def _interp_matrices(shift: torch.Tensor, size: int) -> torch.Tensor:
+    """Clamped bilinear interpolation matrices ``M[..., a, b]``: output ``a`` reads ``a + shift``."""
+    target = torch.arange(size, dtype=shift.dtype, device=shift.device)
+    i0, i1, w = _lerp_taps(shift[..., None] + target, size)
+    cols = torch.arange(size, device=shift.device)
+    m0 = (i0[..., None] == cols).to(shift.dtype)
+    m1 = (i1[..., None] == cols).to(shift.dtype)
+    return m0 + w[..., None] * (m1 - m0)
+
+
+class _GramLoss:
+    """The gradient-domain path fit ``sum ||grad_yx(K_p l) - grad_yx f||^2`` as a quadratic form.
+
+    With ``d_inf = 0`` the blur of a pixel is a kernel over integer view
+    offsets applied to its replicate-padded angular samples: clamped
+    bilinear interpolation at ``u + s`` equals ``(1 - w) l[clamp(u + o)] + w
+    l[clamp(u + o + 1)]`` with ``o = floor(s)``, ``w = s - o``, for every
+    ``s``. The kernel (the splat of the positions ``(s_v, s_u)`` over the
+    instants) is shared by all pixels of an in-plane path; with ``p_z`` it
+    varies slowly over the image, and is taken constant over each of
+    ``tiles x tiles`` tiles (at the tile centre). The spatial differences
+    commute with the angular blur, so the fit is
+
+        sum_t  k_t^T G_t k_t - 2 b_t^T k_t + c,
+
+    with ``G_t``, ``b_t`` the Gram matrix and correlation of the shifted
+    latent gradients at a subset of pixels of tile ``t``: built once per
+    latent, after which a path step costs a few small products.
+    """
+
+    def __init__(self, f, n_pixels, rng, T, box_xy, box_z, tiles, chunk=256):
+        V, U, Y, X, _ = f.shape
+        self.V, self.U, self.Y, self.X, self.T = V, U, Y, X, T
+        self.R = int(min(max(V, U) - 1, math.floor(box_xy + box_z) + 1))
+        R = self.R
+        self.nO = 2 * R + 1
+        self.chunk = chunk
+        dev, dt = f.device, f.dtype
+        gy, gx = _grad_yx(f)
+        score = (gy * gy + gx * gx).sum(dim=(0, 1, 4))[: Y - 1, : X - 1].sqrt().cpu().double().numpy()
+        # stratified: the same number of pixels from every tile, favouring strong gradients
+        ty = np.minimum((np.arange(Y - 1) * tiles) // (Y - 1), tiles - 1)
+        tx = np.minimum((np.arange(X - 1) * tiles) // (X - 1), tiles - 1)
+        tile_of = (ty[:, None] * tiles + tx[None, :]).ravel()
+        per = max(1, int(n_pixels) // (tiles * tiles))
+        sel, sel_tile = [], []
+        flat = score.ravel()
+        for t in range(tiles * tiles):
+            idx = np.flatnonzero(tile_of == t)
+            if idx.size == 0:
+                continue
+            pr = flat[idx] + 0.05 * flat.mean() + 1e-12
+            pr = pr / pr.sum()
+            k = min(per, idx.size)
+            sel.append(np.sort(rng.choice(idx, size=k, replace=False, p=pr)))
+            sel_tile.append(np.full(k, t))
+        sel = np.concatenate(sel)
+        ys, xs = np.divmod(sel, X - 1)
+        self.ys = torch.as_tensor(ys, device=dev)
+        self.xs = torch.as_tensor(xs, device=dev)
+        self.pix_tile = torch.as_tensor(np.concatenate(sel_tile), device=dev)
+        self.n_tiles = tiles * tiles
+        r = max(X, Y) / 2.0
+        cy = np.array([(ys[tile_of[sel] // tiles == i]).mean() if np.any(tile_of[sel] // tiles == i) else 0
+                       for i in range(tiles)])
+        cx = np.array([(xs[tile_of[sel] % tiles == i]).mean() if np.any(tile_of[sel] % tiles == i) else 0
+                       for i in range(tiles)])
+        tyc = (np.repeat(cy, tiles) - (Y - 1) / 2.0) / r
+        txc = (np.tile(cx, tiles) - (X - 1) / 2.0) / r
+        self.xt = torch.as_tensor(txc, dtype=dt, device=dev)
+        self.yt = torch.as_tensor(tyc, dtype=dt, device=dev)
+        # the data's gradients at the pixels: (M, V*U*2)
+        self.F = torch.cat([gy[:, :, self.ys, self.xs, 0], gx[:, :, self.ys, self.xs, 0]], dim=0)
+        self.F = self.F.permute(2, 0, 1).reshape(len(sel), -1)
+        offs = torch.arange(-R, R + 1, device=dev)
+        self.vidx = (torch.arange(V, device=dev)[None, :] + offs[:, None]).clamp(0, V - 1)  # (nO, V)
+        self.uidx = (torch.arange(U, device=dev)[None, :] + offs[:, None]).clamp(0, U - 1)
+        self.G = None
+        self.scale = 1.0 / max(1, self.F.numel())
+
+    @torch.no_grad()
+    def set_latent(self, latent):
+        gy, gx = _grad_yx(latent)
+        Lg = torch.stack([gy[:, :, self.ys, self.xs, 0], gx[:, :, self.ys, self.xs, 0]], dim=0)  # (2, V, U, M)
+        nO, M = self.nO, self.ys.shape[0]
+        G = torch.zeros(self.n_tiles, nO * nO, nO * nO, dtype=latent.dtype, device=latent.device)
+        b = torch.zeros(self.n_tiles, nO * nO, dtype=latent.dtype, device=latent.device)
+        for m0 in range(0, M, self.chunk):
+            m1 = min(M, m0 + self.chunk)
+            part = Lg[..., m0:m1]  # (2, V, U, m)
+            # Z[ov, ou, m, (2, V, U)]: the samples at (clamp(v + ov), clamp(u + ou))
+            Zv = part[:, self.vidx]  # (2, nO, V, U, m)
+            Z = Zv[:, :, :, self.uidx]  # (2, nO_v, V, nO_u, U, m)
+            Z = Z.permute(1, 3, 5, 0, 2, 4).reshape(nO * nO, m1 - m0, -1)  # (O, m, 2VU)
+            Fm = self.F[m0:m1]  # (m, 2VU) in (2, V, U) order
+            tiles = self.pix_tile[m0:m1]
+            for t in torch.unique(tiles).tolist():
+                sel = (tiles == t).nonzero().squeeze(1)
+                Zt = Z[:, sel].reshape(nO * nO, -1)
+                G[t] += Zt @ Zt.T
+                b[t] += Zt @ Fm[sel].reshape(-1)
+        self.G, self.b = G, b
+
+    def kernels(self, cp):
+        """The splat kernels of the tiles, (n_tiles, nO*nO)."""
+        pos = bezier_positions(cp, self.T)  # (T, 3)
+        R, nO = self.R, self.nO
+        s_u = pos[None, :, 0] - self.xt[:, None] * pos[None, :, 2]  # (tiles, T)
+        s_v = pos[None, :, 1] - self.yt[:, None] * pos[None, :, 2]
+        s_u = s_u.clamp(-R + 1e-4, R - 1e-4)
+        s_v = s_v.clamp(-R + 1e-4, R - 1e-4)
+        fu, fv = torch.floor(s_u.detach()), torch.floor(s_v.detach())
+        wu, wv = s_u - fu, s_v - fv
+        iu, iv = (fu + R).long(), (fv + R).long()
+        K = torch.zeros(s_u.shape[0], nO * nO, dtype=cp.dtype, device=cp.device)
+        for dv, wvv in ((0, 1 - wv), (1, wv)):
+            for du, wuu in ((0, 1 - wu), (1, wu)):
+                idx = ((iv + dv).clamp(max=nO - 1)) * nO + (iu + du).clamp(max=nO - 1)
+                K = K.scatter_add(1, idx, wvv * wuu)
+        return K / self.T
+
+    def __call__(self, cp):
+        K = self.kernels(cp)
+        quad = torch.einsum("ti,tij,tj->", K, self.G, K) - 2.0 * (self.b * K).sum()
+        return quad * self.scale
+
+
+def _fit_path(pp: _PathParam, loss_fn, steps: int, lr: float):
+    """Adam on the path for ``steps`` steps (fewer when it stalls); returns the final loss."""
+    opt = torch.optim.Adam([pp.q], lr=lr)
+    best = float("inf")
+    stall = 0
+    loss = float("nan")
+    for _ in range(steps):
+        opt.zero_grad(set_to_none=True)
+        lt = loss_fn(pp.control_points())
+        lt.backward()
+        opt.step()
+        pp.project()
+        loss = float(lt.detach())
+        if loss < best * (1 - 1e-4):
+            best, stall = loss, 0
+        else:
+            stall += 1
+            if stall >= 10:
+                break
+    with torch.no_grad():
+        return float(loss_fn(pp.control_points()))
+
+
+def _positions(cp: np.ndarray, n_times: int) -> np.ndarray:
+    return bezier_positions(cp, n_times)
+
+
+def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info):
+    """Coarse-to-fine salient-edge / path alternation on the grayscale ``g`` (V, U, Y, X, 1)."""
+    V, U, Y, X, _ = g.shape
+    # pyramid: factors 2^k with the smallest side >= min_size
+    top = 1
+    while p.max_size and min(Y, X) // top > p.max_size and min(Y, X) // (2 * top) >= p.min_size:
+        top *= 2
+    factors = []
+    for k in range(p.n_levels - 1, -1, -1):
+        fac = top * 2**k
+        if min(Y, X) // fac >= p.min_size or fac == top:
+            factors.append(fac)
+    n_stages = len(factors)
+    T = p.n_times
+    # initial paths: short lines in evenly spread directions, jittered by the seed
+    n_start = 2 if len(factors) > 1 or n_cp == 2 else n_cp
+    starts = []
+    for i in range(p.n_restarts):
+        a = math.pi * (i + rng.uniform(-0.15, 0.15)) / p.n_restarts
+        d = np.array([math.cos(a), math.sin(a), 0.0]) * p.init_length / 2
+        starts.append(np.stack([-d, d]))
+    cp = None
+    lam0 = p.l0_weight
+    for stage, fac in enumerate(factors):
+        f = _downsample(g, fac)
+        shape = tuple(f.shape)
+        d_lvl = d_inf / fac
+        n_lvl = n_cp if stage == len(factors) - 1 else min(n_cp, n_start + stage)
+        free_z = p.estimate_z and stage >= len(factors) - p.z_levels
+        sub = _GramLoss(f, p.n_pixels, rng, T, box, box * p.z_box if free_z else 0.0, p.tiles if free_z else 1)
+        lam = lam0
+        latent = f.clone()
+        cur = np.zeros((n_lvl, 3)) if cp is None else elevate_degree(cp, n_lvl)
+        if not free_z:
+            cur[:, 2] = 0.0
+        still = 0
+        for outer in range(1, p.n_outer + 1):
+            op = BlurOperator(shape, cur, n_times=T, infinity_disparity=d_lvl, device=device)
+            latent = _l0_latent(op, f, lam, p, latent)
+            sub.set_latent(latent)
+            if cp is None and outer == 1:
+                candidates = [elevate_degree(c, n_lvl) for c in starts]
+            else:
+                candidates = [cur, -cur] if p.try_mirror else [cur]
+            best = None
+            scores = []
+            for cand in candidates:
+                pp = _PathParam(cand, T, box, device, free_z=free_z, z_box=box * p.z_box)
+                pp.project()
+                loss = _fit_path(pp, sub, p.path_steps, p.path_lr)
+                scores.append(loss)
+                if best is None or loss < best[0]:
+                    best = (loss, pp.numpy())
+            if cp is None and outer == 1:
+                info["restart_losses"] = scores
+            loss, new = best
+            move = float(np.abs(_positions(new, T) - _positions(cur, T)).max()) if len(new) == len(cur) else 1.0
+            cur = new
+            history.append(loss)
+            lam = max(lam * p.l0_decay, p.l0_weight * p.l0_floor)
+            yield Progress(
+                stage=f"path (level {stage + 1}/{n_stages}, {Y // fac}x{X // fac})",
+                iteration=outer, n_iterations=p.n_outer, loss=loss, control_points=cur,
+                stage_index=stage, n_stages=n_stages + 1,
+                info={"level": stage, "factor": fac, "lambda": lam, "move": move},
+            )
+            still = still + 1 if move < p.path_tol else 0
+            if still >= 2:
+                break
+        cp = cur
+        lam0 = lam
+    return elevate_degree(cp, n_cp), factors
+
+
+def _iter_joint(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info):
+    """The paper's joint Adam on path and grayscale light field."""
+    shape = tuple(g.shape)
+    cp0 = rng.uniform(-0.25, 0.25, size=(n_cp, 3))
+    cp0[:, 2] = 0.0
+    pp = _PathParam(cp0, p.n_times, box, device)
+    pp.project()
+    L = g.clone().requires_grad_(True)
+    opt = torch.optim.Adam([{"params": [pp.q], "lr": p.path_lr}, {"params": [L], "lr": p.lf_lr}])
+    w0 = p.prior_weight
+    for it in range(1, p.n_iter + 1):
+        w = max(w0 * p.prior_decay ** (it - 1), w0 * p.prior_floor)
+        eps = max(p.eps * p.eps_decay ** (it - 1), p.eps_min)
+        opt.zero_grad(set_to_none=True)
+        op = BlurOperator(shape, pp.control_points(), n_times=p.n_times, infinity_disparity=d_inf, device=device)
+        r = op.forward(L) - g
+        loss = (r * r).mean() + w * sparse_gradient_prior(L, eps)
+        loss.backward()
+        opt.step()
+        pp.project()
+        history.append(float(loss.detach()))
+        yield Progress(stage="path (joint)", iteration=it, n_iterations=p.n_iter, loss=history[-1],
+                       control_points=pp.numpy(), stage_index=0, n_stages=2,
+                       info={"prior_weight": w, "eps": eps})
+    return pp.numpy(), [1]
+
+
+def iter_blind_deblur(
+    blurred,
+    *,
+    infinity_disparity: float = 0.0,
+    params: BlindParams | dict | str | None = None,
+    device="auto",
+    seed: int = 0,
+    n_control_points: int | None = None,
+    **overrides,
+):
+    """Blind deblurring as a generator: yields progress, returns a :class:`BlindResult`.
+
+    Takes the arguments of :func:`blind_deblur`. Arguments are checked when
+    the generator is created; closing it stops the work at the next yield
+    (at most one path alternation or one TV iteration later).
+
+    Yields
+    ------
+    Progress
+        ``stage`` names the stage (``'path (level i/n, YxX)'``, ``'final'``),
+        ``control_points`` the current path, ``preview`` now and then the
+        current light field estimate.
+
+    Returns
+    -------
+    BlindResult
+    """
+    arr, d_inf = _validate_input(blurred, infinity_disparity, n_control_points)
+    p = _make_params(params, overrides)
+    dev = select_device(device)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise ValueError(f"seed must be an integer; got {seed!r}")
+    dev = plan_device(dev, estimate_blind_memory(arr.shape, p))
+    return _run_with_fallback(arr, d_inf, p, dev, int(seed), n_control_points)
+
+
+def plan_device(device: torch.device, need: int) -> torch.device:
+    """The device to run on, given an estimate of the memory needed (bytes).
+
+    A CUDA device without ``need`` bytes free falls back to the CPU with a
+    :class:`RuntimeWarning`; on the CPU a shortage is only warned about.
+    """
+    free = _free_memory(device)
+    if free is None or need <= free:
+        return device
+    if device.type == "cuda":
+        warnings.warn(
+            f"blind deblurring needs about {need / 2**30:.2f} GiB but {device} has {free / 2**30:.2f} GiB free: "
+            "running on the CPU instead",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return torch.device("cpu")
+    warnings.warn(
+        f"blind deblurring needs about {need / 2**30:.2f} GiB but only {free / 2**30:.2f} GiB of memory is "
+        "available: it may fail or swap; crop the light field to be safe",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+    return device
+
+
+def _run_with_fallback(arr, d_inf, p, dev, seed, n_control_points):
+    try:
+        result = yield from _run(arr, d_inf, p, dev, seed, n_control_points)
+        return result
+    except torch.cuda.OutOfMemoryError as exc:
+        if dev.type != "cuda":
+            raise
+        _empty_cache(dev)
+        warnings.warn(f"the GPU ran out of memory ({str(exc).splitlines()[0]}); starting again on the CPU",
+                      RuntimeWarning, stacklevel=2)
+        result = yield from _run(arr, d_inf, p, torch.device("cpu"), seed, n_control_points)
+        return result
+    finally:
+        _empty_cache(dev)
+
+
+def _empty_cache(dev):
+    """Release cached GPU memory (a no-op on the CPU)."""
+    if dev.type == "cuda" and torch.cuda.is_available():  # pragma: no cover - needs a GPU
+        torch.cuda.empty_cache()
+
+
+def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points):
+    t0 = time.perf_counter()
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    V, U = arr.shape[:2]
+    n_cp = int(n_control_points) if n_control_points is not None else p.n_control_points
+    box = p.max_extent if p.max_extent > 0 else max(0.5, 0.35 * (min(V, U) - 1))
+    f = torch.as_tensor(np.ascontiguousarray(arr), dtype=torch.float32, device=dev)
+    if arr.ndim == 4:
+        f = f.unsqueeze(-1)
+    g = _gray(f).contiguous()
+    history: list = []
+    info: dict = {"device": str(dev), "box": box}
+    if p.method == "alternating":
+        cp, factors = yield from _iter_alternating(g, d_inf, p, dev, rng, n_cp, box, history, info)
+    else:
+        cp, factors = yield from _iter_joint(g, d_inf, p, dev, rng, n_cp, box, history, info)
+    info["levels"] = [(arr.shape[2] // k, arr.shape[3] // k) for k in factors]
+    cp = canonical_time_direction(center_path(cp, p.n_times))
+    t1 = time.perf_counter()
+    del g
+    # final non-blind stage, all channels at once
+    if p.tv_iter > 0:
+        from .deconvolution import iter_deconvolve
+
+        gen = iter_deconvolve(
+            arr, cp, n_times=p.final_n_times, infinity_disparity=d_inf, device=dev,
+            method="tv", weight=p.tv_weight, n_iter=p.tv_iter, tol=0.0,
+            preview_every=p.preview_every,
+        )
+        while True:
+            try:
+                rec = next(gen)
+            except StopIteration as stop:
+                out = stop.value
+                break
+            yield Progress(stage="final", iteration=rec.iteration, n_iterations=rec.n_iterations,
+                           loss=rec.loss, control_points=cp, preview=rec.preview, stage_index=len(factors),
+                           n_stages=len(factors) + 1, info=rec.info)
+    else:
+        out = np.asarray(arr, dtype=np.float32).copy()
+    t2 = time.perf_counter()
+    return BlindResult(
+        lightfield=np.asarray(out, dtype=np.float32),
+        control_points=cp,
+        loss_history=history,
+        params=p,
+        timings={"path": t1 - t0, "final": t2 - t1, "total": t2 - t0},
+        info=info,
+    )
+
+
+def blind_deblur(
+    blurred,
+    *,
+    infinity_disparity: float = 0.0,
+    params: BlindParams | dict | str | None = None,
+    device="auto",
+    seed: int = 0,
+    n_control_points: int | None = None,
+    callback=None,
+    **overrides,
+) -> BlindResult:
+    """Estimate the camera path and the sharp light field of a motion-blurred light field.
+
+    Parameters
+    ----------
+    blurred : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
+        The blurred light field (MODEL.md layout), computed in float32.
+    infinity_disparity : float, default 0.0
+        ``d_inf`` in px/view of the blur model.
+    params : BlindParams, dict or str, optional
+        Parameters, or a preset name (``'default'``, ``'paper'``). Single
+        fields may also be given as keywords, overriding them.
+    device : {'auto', 'cpu', 'cuda'}, default 'auto'
+        Falls back to the CPU, with a warning, when the GPU lacks the memory.
+    seed : int, default 0
+        Seed of the random parts (initial paths); equal seeds give equal results.
+    n_control_points : int, optional
+        Control points of the estimated path (default ``params.n_control_points``).
+    callback : callable, optional
+        Called with each :class:`~napari_lfdeblur._progress.Progress` record.
+
+    Returns
+    -------
+    BlindResult
+        ``.lightfield`` (input shape, float32), ``.control_points`` ((n, 3),
+        zero-mean gauge), ``.loss_history``, ``.params``, ``.timings``.
+
+    Raises
+    ------
+    ValueError
+        On a malformed light field (wrong ndim, NaN), unknown or invalid
+        parameters.
+    """
+    gen = iter_blind_deblur(
+        blurred, infinity_disparity=infinity_disparity, params=params, device=device, seed=seed,
+        n_control_points=n_control_points, **overrides,
+    )
+    return run_to_completion(gen, callback)

@@ -1,0 +1,357 @@
+"""Tests of blind deblurring (napari_lfdeblur.blind) at tiny sizes."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+from napari_lfdeblur import blind
+from napari_lfdeblur.blind import (
+    BlindParams,
+    BlindResult,
+    blind_deblur,
+    canonical_time_direction,
+    elevate_degree,
+    iter_blind_deblur,
+    sparse_gradient_prior,
+)
+from napari_lfdeblur.blur import BlurOperator, simulate_blur
+from napari_lfdeblur.path import bezier_positions, linear_path
+
+from napari_lfdeblur.metrics import chamfer_distance
+
+# small and fast: the test cases use few iterations
+FAST = dict(n_outer=3, path_steps=150, tv_iter=40, final_n_times=8, n_restarts=4)
+
+
+def _scene(shape=(7, 7, 48, 48), seed=0, disparities=(2.0, -1.5)):
+    """Two fronto-parallel piecewise-constant layers (a square in front of a background)."""
+    V, U, Y, X = shape
+    rng = np.random.default_rng(seed)
+
+    def texture(h, w):
+        t = np.full((h, w), rng.uniform(0.3, 0.7))
+        for _ in range(40):
+            y, x = rng.integers(0, h), rng.integers(0, w)
+            s = rng.integers(2, 7)
+            t[y : y + s, x : x + s] = rng.uniform(0, 1)
+        return t
+
+    pad = 16
+    bg = texture(Y + 2 * pad, X + 2 * pad)
+    fg = texture(Y + 2 * pad, X + 2 * pad)
+    lf = np.empty(shape, np.float32)
+    for v in range(V):
+        for u in range(U):
+            dv, du = v - (V - 1) / 2, u - (U - 1) / 2
+            sb = (int(round(pad - disparities[1] * dv)), int(round(pad - disparities[1] * du)))
+            sf = (int(round(pad - disparities[0] * dv)), int(round(pad - disparities[0] * du)))
+            view = bg[sb[0] : sb[0] + Y, sb[1] : sb[1] + X].copy()
+            f = fg[sf[0] : sf[0] + Y, sf[1] : sf[1] + X]
+            view[Y // 4 : 3 * Y // 4, X // 4 : 3 * X // 4] = f[Y // 4 : 3 * Y // 4, X // 4 : 3 * X // 4]
+            lf[v, u] = view
+    return lf
+
+
+def _positions(cp, n=64):
+    p = bezier_positions(np.asarray(cp), n)
+    return p - p.mean(0)
+
+
+@pytest.fixture(scope="module")
+def linear_case():
+    sharp = _scene()
+    cp = linear_path(2.0, angle_deg=30.0)
+    rng = np.random.default_rng(1)
+    blurred = simulate_blur(sharp, cp, n_times=32) + rng.normal(0, 0.002, sharp.shape).astype(np.float32)
+    return sharp, cp, np.clip(blurred, 0, 1).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def linear_result(linear_case):
+    _, _, blurred = linear_case
+    return blind_deblur(blurred, params=BlindParams().replace(n_control_points=2, **FAST), device="cpu")
+
+
+# ------------------------------------------------------------ the solver
+
+
+def test_lowers_the_error_against_ground_truth(linear_case, linear_result):
+    sharp, _, blurred = linear_case
+    res = linear_result
+    assert isinstance(res, BlindResult)
+    assert res.lightfield.shape == sharp.shape and res.lightfield.dtype == np.float32
+    c = 6
+    err_blurred = np.sqrt(np.mean((blurred - sharp)[:, :, c:-c, c:-c] ** 2))
+    err_restored = np.sqrt(np.mean((res.lightfield - sharp)[:, :, c:-c, c:-c] ** 2))
+    # at least 25 % less RMSE (about +2.5 dB) than the blurred input
+    assert err_restored < 0.75 * err_blurred
+
+
+def test_recovers_a_linear_in_plane_path(linear_case, linear_result):
+    _, cp, _ = linear_case
+    est = _positions(linear_result.control_points)
+    true = _positions(cp)
+    # order-blind comparison in the zero-mean gauge: Chamfer distance under a quarter of the 2-view extent
+    assert chamfer_distance(est, true) < 0.5
+    # and the direction of motion agrees within 20 degrees (up to sign)
+    d_est = est[-1, :2] - est[0, :2]
+    d_true = true[-1, :2] - true[0, :2]
+    cos = abs(d_est @ d_true) / (np.linalg.norm(d_est) * np.linalg.norm(d_true))
+    assert cos > np.cos(np.radians(20))
+
+
+def test_result_gauge_and_range(linear_case, linear_result):
+    res = linear_result
+    cp = res.control_points
+    assert cp.shape == (2, 3)
+    # zero-mean gauge for the model's instants
+    assert np.allclose(bezier_positions(cp, res.params.n_times).mean(0), 0, atol=1e-5)
+    # FINDINGS section 3: the path stays within the aperture's box
+    V = linear_case[0].shape[0]
+    assert np.abs(cp).max() <= 0.35 * (V - 1) + 1e-6
+    assert res.loss_history and all(np.isfinite(res.loss_history))
+    assert set(res.timings) >= {"path", "final", "total"}
+
+
+def test_same_seed_same_result():
+    lf = _scene((5, 5, 24, 24), seed=3)
+    blurred = simulate_blur(lf, linear_path(1.5, 60.0), n_times=16)
+    p = BlindParams().replace(n_outer=2, path_steps=40, tv_iter=5, n_restarts=2, final_n_times=4)
+    a = blind_deblur(blurred, params=p, device="cpu", seed=7)
+    b = blind_deblur(blurred, params=p, device="cpu", seed=7)
+    np.testing.assert_array_equal(a.control_points, b.control_points)
+    np.testing.assert_array_equal(a.lightfield, b.lightfield)
+
+
+def test_estimated_paths_stay_in_range_on_flat_scene():
+    # a scene of nearly zero disparity gives the path no hold (FINDINGS section 3): it must stay boxed
+    rng = np.random.default_rng(0)
+    view = rng.random((20, 20)).astype(np.float32)
+    lf = np.broadcast_to(view, (5, 5, 20, 20)).copy()
+    p = BlindParams().replace(n_outer=2, path_steps=60, tv_iter=0, estimate_z=True)
+    res = blind_deblur(lf, params=p, device="cpu")
+    box = 0.35 * 4
+    assert np.abs(res.control_points[:, :2]).max() <= box + 1e-6
+    assert np.abs(res.control_points[:, 2]).max() <= 0.5 * box + 1e-6
+    # tv_iter = 0 returns the input unchanged
+    np.testing.assert_array_equal(res.lightfield, lf)
+
+
+def test_infinity_disparity_runs_and_keeps_shape():
+    lf = _scene((5, 5, 20, 20), seed=2)[..., None].repeat(3, axis=-1)
+    blurred = simulate_blur(lf, linear_path(1.0), n_times=8, infinity_disparity=0.5)
+    p = BlindParams().replace(n_outer=1, path_steps=20, tv_iter=3, n_restarts=1, final_n_times=4)
+    res = blind_deblur(blurred, infinity_disparity=0.5, params=p, device="cpu")
+    assert res.lightfield.shape == lf.shape and np.all(np.isfinite(res.lightfield))
+
+
+def test_generator_yields_progress_and_closes_promptly(monkeypatch):
+    lf = _scene((5, 5, 20, 20), seed=4)
+    blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
+    calls = {"n": 0}
+    real = blind._l0_latent
+
+    def counting(*a, **k):
+        calls["n"] += 1
+        return real(*a, **k)
+
+    monkeypatch.setattr(blind, "_l0_latent", counting)
+    gen = iter_blind_deblur(blurred, params=BlindParams().replace(n_outer=50, path_tol=0.0), device="cpu")
+    first = next(gen)
+    second = next(gen)
+    assert first.stage.startswith("path") and first.control_points.shape[1] == 3
+    assert np.isfinite(first.loss) and second.iteration == first.iteration + 1
+    done = calls["n"]
+    gen.close()
+    assert calls["n"] <= done + 1
+    with pytest.raises(StopIteration):
+        next(gen)
+
+
+# ------------------------------------------------------------ parameters
+
+
+@pytest.mark.parametrize("name", ["default", "paper"])
+def test_presets_round_trip_through_json(name):
+    p = BlindParams.preset(name)
+    text = p.to_json()
+    assert BlindParams.from_json(text) == p
+    assert BlindParams.from_dict(json.loads(text)) == p
+
+
+def test_paper_preset_is_the_published_settings():
+    p = BlindParams.preset("paper")
+    assert (p.method, p.n_iter, p.path_lr, p.lf_lr, p.n_times) == ("joint", 1000, 1.0, 0.04, 7)
+    assert (p.prior_weight, p.prior_decay, p.prior_floor) == (8e-3, 0.997, 0.1)
+    assert (p.eps, p.eps_decay, p.eps_min) == (0.12, 0.997, 0.04)
+    assert (p.tv_weight, p.tv_iter) == (0.004, 100)
+    assert blind.PRESETS["paper"] == p
+
+
+def test_joint_method_runs():
+    lf = _scene((5, 5, 16, 16), seed=5)
+    blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
+    p = BlindParams.preset("paper").replace(n_iter=5, tv_iter=2)
+    res = blind_deblur(blurred, params=p, device="cpu")
+    assert res.lightfield.shape == lf.shape and len(res.loss_history) == 5
+
+
+def test_bad_input_gives_clear_errors():
+    good = np.zeros((5, 5, 8, 8), np.float32)
+    with pytest.raises(ValueError, match="4D"):
+        blind_deblur(np.zeros((5, 8, 8), np.float32))
+    bad = good.copy()
+    bad[0, 0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        blind_deblur(bad)
+    with pytest.raises(ValueError, match="unknown blind parameter"):
+        BlindParams.from_dict({"n_outer": 3, "bogus": 1})
+    with pytest.raises(ValueError, match="unknown blind parameter"):
+        BlindParams.from_json('{"learning_rate": 1}')
+    with pytest.raises(ValueError, match="n_iter"):
+        BlindParams(n_iter=-1)
+    with pytest.raises(ValueError, match="path_steps"):
+        blind_deblur(good, path_steps=-5)
+    with pytest.raises(ValueError, match="unknown blind preset"):
+        BlindParams.preset("fastest")
+    with pytest.raises(ValueError, match="method"):
+        BlindParams(method="magic")
+    with pytest.raises(ValueError, match="n_control_points"):
+        blind_deblur(good, n_control_points=1)
+
+
+# ------------------------------------------------------------ pieces
+
+
+def test_sparse_gradient_prior_matches_definition():
+    L = torch.rand(3, 4, 5, 6, dtype=torch.float64)
+    eps = 0.3
+    ref = 0.0
+    for axis in range(4):
+        d = np.diff(L.numpy(), axis=axis)
+        full = np.zeros(L.shape)
+        sl = [slice(None)] * 4
+        sl[axis] = slice(0, L.shape[axis] - 1)
+        full[tuple(sl)] = d
+        ref += np.minimum(full**2 / eps**2, 1).mean()
+    assert float(sparse_gradient_prior(L, eps)) == pytest.approx(ref)
+
+
+def test_subset_blur_equals_operator():
+    torch.manual_seed(0)
+    cp = np.array([[-0.8, 0.3, 0.4], [0.5, -0.6, -0.3], [0.9, 0.7, 0.2]])
+    ys = torch.tensor([0, 3, 11, 5])
+    xs = torch.tensor([0, 15, 7, 2])
+    for d_inf in (0.0, 0.7):
+        L = torch.rand(5, 5, 12, 16, 1, dtype=torch.float64)
+        op = BlurOperator(L.shape, cp, n_times=6, infinity_disparity=d_inf, device="cpu", dtype=torch.float64)
+        full = op.forward(L)[:, :, ys, xs]
+        pos = bezier_positions(torch.tensor(cp), 6)
+        sub = blind._subset_blur(L if d_inf else L[:, :, ys, xs], ys, xs, pos, d_inf, L.shape)
+        torch.testing.assert_close(sub, full)
+
+
+def test_gram_loss_equals_direct_fit_up_to_a_constant():
+    torch.manual_seed(1)
+    f = torch.rand(5, 5, 20, 24, 1, dtype=torch.float64)
+    lat = torch.rand(5, 5, 20, 24, 1, dtype=torch.float64)
+    gl = blind._GramLoss(f, 10**6, np.random.default_rng(0), 6, 1.4, 0.0, 1)
+    gl.set_latent(lat)
+
+    def direct(cp):
+        b = BlurOperator(f.shape, cp, n_times=6, device="cpu", dtype=torch.float64).forward(lat)
+        (by, bx), (fy, fx) = blind._grad_yx(b), blind._grad_yx(f)
+        r = (by - fy)[:, :, gl.ys, gl.xs] ** 2 + (bx - fx)[:, :, gl.ys, gl.xs] ** 2
+        return float(r.sum())
+
+    cps = [np.array([[-0.6, 0.2, 0], [0.7, -0.4, 0], [0.1, 0.9, 0]]), linear_path(1.3, 20.0), linear_path(0.4, 100.0)]
+    gram = [float(gl(torch.tensor(c))) / gl.scale for c in cps]
+    ref = [direct(c) for c in cps]
+    np.testing.assert_allclose(np.diff(gram), np.diff(ref), rtol=1e-8, atol=1e-8)
+
+
+def test_elevate_degree_keeps_the_curve():
+    cp = np.array([[0.0, 0, 0], [1, 2, 0.5], [3, -1, 0]])
+    up = elevate_degree(cp, 5)
+    assert up.shape == (5, 3)
+    np.testing.assert_allclose(bezier_positions(up, 33), bezier_positions(cp, 33), atol=1e-12)
+
+
+def test_canonical_time_direction():
+    cp = np.array([[1.0, 0, 0], [0.2, 0.5, 0], [-1, 0.1, 0]])
+    out = canonical_time_direction(cp)
+    np.testing.assert_array_equal(out, cp[::-1])
+    np.testing.assert_array_equal(canonical_time_direction(out), out)
+
+
+# ------------------------------------------------------------ memory
+
+
+def test_memory_estimate_grows_with_size():
+    small = blind.estimate_blind_memory((5, 5, 32, 32, 3))
+    big = blind.estimate_blind_memory((9, 9, 376, 541, 3))
+    assert 0 < small < big
+    # at least the colour input, output and a few work copies
+    assert big > 9 * 9 * 376 * 541 * 3 * 4 * 5
+
+
+def test_device_falls_back_to_cpu_when_memory_is_short(monkeypatch):
+    monkeypatch.setattr(blind, "_free_memory", lambda device: 1024)
+    with pytest.warns(RuntimeWarning, match="CPU instead"):
+        dev = blind.plan_device(torch.device("cuda"), 10**9)
+    assert dev.type == "cpu"
+    with pytest.warns(RuntimeWarning, match="may fail"):
+        assert blind.plan_device(torch.device("cpu"), 10**9).type == "cpu"
+    monkeypatch.setattr(blind, "_free_memory", lambda device: 10**12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert blind.plan_device(torch.device("cuda"), 10**9).type == "cuda"
+
+
+def test_out_of_memory_mid_run_falls_back_and_releases(monkeypatch):
+    released = []
+    devices_run = []
+
+    def fake_run(arr, d_inf, p, dev, seed, n_cp):
+        devices_run.append(dev.type)
+        yield "progress"
+        if dev.type == "cuda":
+            raise torch.cuda.OutOfMemoryError("CUDA out of memory. Tried to allocate 2 GiB")
+        return "done on cpu"
+
+    monkeypatch.setattr(blind, "_run", fake_run)
+    monkeypatch.setattr(blind, "_empty_cache", lambda dev: released.append(dev.type))
+    gen = blind._run_with_fallback(None, 0.0, None, torch.device("cuda"), 0, None)
+    with pytest.warns(RuntimeWarning, match="out of memory"):
+        out = blind.run_to_completion(gen)
+    assert out == "done on cpu"
+    assert devices_run == ["cuda", "cpu"]
+    assert "cuda" in released  # memory released after the failure (and in the finally)
+
+
+# ------------------------------------------------------------ CLI
+
+
+def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys):
+    from napari_lfdeblur.cli import main
+    from napari_lfdeblur.path import load_path_json
+
+    lf = _scene((5, 5, 16, 16), seed=6)
+    blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
+    src = tmp_path / "blurred.npz"
+    np.savez(src, lightfield=blurred)
+    params = tmp_path / "p.json"
+    params.write_text(BlindParams().replace(n_outer=1, path_steps=10, tv_iter=2, n_restarts=1).to_json())
+    out = tmp_path / "sharp.npz"
+    assert main(["deblur", str(src), str(out), "--params", str(params), "--device", "cpu"]) == 0
+    assert out.exists()
+    cp = load_path_json(tmp_path / "sharp_path.json")
+    assert cp.shape[1] == 3
+    # existing output without --overwrite: a one-line error, status 2
+    assert main(["deblur", str(src), str(out), "--params", str(params)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["deblur", str(tmp_path / "missing.npz"), str(tmp_path / "o.npz")]) == 2
+    assert main(["deblur", str(src), str(tmp_path / "o2.npz"), "--preset", "nope"]) == 2
