@@ -53,6 +53,7 @@ _PUBLIC = {
     "blind_deblur": "blind",
     "iter_blind_deblur": "blind",
     "BlindParams": "blind",
+    "BlindResult": "blind",
     # metrics
     "psnr": "metrics",
     "ssim": "metrics",

@@ -91,6 +91,63 @@ def _run_simulate(args):
     print(f"wrote {written} {blurred.shape}, with its camera path beside it")
 
 
+# ---------------------------------------------------------------- deblur
+
+
+def _add_deblur(sub):
+    p = sub.add_parser("deblur", help="blind deblurring: estimate the camera path and the sharp light field")
+    p.add_argument("input", help="blurred light field file or folder")
+    p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
+    p.add_argument("--preset", default="default", help="parameter preset: default or paper (default: default)")
+    p.add_argument("--params", help="a JSON file of BlindParams (overrides --preset)")
+    p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+
+
+def _run_deblur(args):
+    from .blind import BlindParams, iter_blind_deblur
+    from .io import write_lightfield
+    from .path import save_path_json
+
+    out = Path(args.output)
+    path_file = Path(args.path_out) if args.path_out else out.with_name(out.stem + "_path.json")
+    for target in (out, path_file):
+        if target.exists() and not args.overwrite:
+            raise CLIError(f"{target} exists; pass --overwrite to replace it")
+    if args.params:
+        if not Path(args.params).is_file():
+            raise CLIError(f"parameter file {args.params} does not exist")
+        params = BlindParams.from_json(Path(args.params).read_text())
+    else:
+        params = BlindParams.preset(args.preset)
+    lf = _read(args.input)
+    gen = iter_blind_deblur(lf, infinity_disparity=args.infinity_disparity, params=params,
+                            device=args.device, seed=args.seed)
+    bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
+    try:
+        while True:
+            try:
+                rec = next(gen)
+            except StopIteration as stop:
+                result = stop.value
+                break
+            bar.n = int(1000 * rec.fraction)
+            bar.set_description(rec.stage, refresh=False)
+            bar.set_postfix_str(f"loss {rec.loss:.3g}", refresh=True)
+    finally:
+        gen.close()
+        bar.close()
+    write_lightfield(out, result.lightfield, overwrite=args.overwrite)
+    save_path_json(path_file, result.control_points, overwrite=True, n_times=params.n_times,
+                   infinity_disparity=args.infinity_disparity, preset=args.preset if not args.params else None,
+                   timings=result.timings)
+    print(f"wrote {out} {result.lightfield.shape} and its path {path_file} "
+          f"({result.timings.get('total', float('nan')):.1f} s)")
+
+
 # ------------------------------------------------------------------ demo
 
 
@@ -218,7 +275,7 @@ def _run_deconvolve(args):
 
 # ------------------------------------------------------------------ main
 
-_COMMANDS = ["simulate", "deconvolve", "demo", "info"]
+_COMMANDS = ["simulate", "deconvolve", "demo", "info", "deblur"]
 
 
 def build_parser() -> argparse.ArgumentParser:
