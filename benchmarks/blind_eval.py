@@ -480,9 +480,12 @@ def render(rows, means, methods, skipped, args, env) -> str:
         *targets(means, args.quick, rows),
         "",
     ]
-    if skipped:
-        lines += ["## Skipped", ""]
-        lines += [f"- `{m}`: {why}" for m, why in skipped.items()]
+    not_requested = [m for m in ALL_METHODS if m not in methods]
+    if skipped or not_requested or args.note:
+        lines += ["## Skipped and notes", ""]
+        lines += [f"- `{m}`: skipped, {why}" for m, why in skipped.items()]
+        lines += [f"- `{m}`: not run (not in `--methods`)." for m in not_requested]
+        lines += [f"- {note}" for note in args.note]
         lines += [""]
     errors = [r for r in rows if "error" in r]
     if errors:
@@ -517,6 +520,7 @@ def main(argv=None) -> int:
         help=f"markdown file to write (default {DEFAULT_OUTPUT.relative_to(ROOT)} for a full run, none for --quick)",
     )
     ap.add_argument("--json", help="also write every row as JSON here")
+    ap.add_argument("--note", action="append", default=[], help="a line of text for the report; repeatable")
     args = ap.parse_args(argv)
 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
