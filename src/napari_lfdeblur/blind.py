@@ -578,6 +578,28 @@ def _gray(f: torch.Tensor) -> torch.Tensor:
     return f.mean(dim=-1, keepdim=True)
 
 
+def _shear(f: torch.Tensor, d: float) -> torch.Tensor:
+    """Refocus: view ``(v, u)`` resampled at ``(y + d v_c, x + d u_c)`` (bilinear, replicate).
+
+    With ``d = d_inf`` this maps the blur model with ``d_inf`` to the one with
+    ``d_inf = 0`` (up to interpolation): the path estimate runs on the
+    sheared light field.
+    """
+    V, U, Y, X, C = f.shape
+    out = torch.empty_like(f)
+    ys = torch.arange(Y, dtype=f.dtype, device=f.device)
+    xs = torch.arange(X, dtype=f.dtype, device=f.device)
+    for v in range(V):
+        y0, y1, wy = _lerp_taps(ys + d * (v - (V - 1) / 2.0), Y)
+        rows = f[v].index_select(1, y0) * (1 - wy)[None, :, None, None] + \
+            f[v].index_select(1, y1) * wy[None, :, None, None]
+        for u in range(U):
+            x0, x1, wx = _lerp_taps(xs + d * (u - (U - 1) / 2.0), X)
+            out[v, u] = rows[u].index_select(1, x0) * (1 - wx)[None, :, None] + \
+                rows[u].index_select(1, x1) * wx[None, :, None]
+    return out
+
+
 def _downsample(f: torch.Tensor, factor: int) -> torch.Tensor:
     """Area-average the spatial axes by ``factor`` (views untouched)."""
     if factor == 1:
@@ -1034,7 +1056,9 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points):
     history: list = []
     info: dict = {"device": str(dev), "box": box}
     if p.method == "alternating":
-        cp, factors = yield from _iter_alternating(g, d_inf, p, dev, rng, n_cp, box, history, info)
+        if d_inf != 0.0:
+            g = _shear(g, d_inf)  # the path fit then uses the d_inf = 0 model
+        cp, factors = yield from _iter_alternating(g, 0.0, p, dev, rng, n_cp, box, history, info)
     else:
         cp, factors = yield from _iter_joint(g, d_inf, p, dev, rng, n_cp, box, history, info)
     info["levels"] = [(arr.shape[2] // k, arr.shape[3] // k) for k in factors]
