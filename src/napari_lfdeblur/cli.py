@@ -275,7 +275,7 @@ def _run_deconvolve(args):
 
 # ------------------------------------------------------------------ main
 
-_COMMANDS = ["simulate", "deconvolve", "demo", "info", "deblur"]
+_COMMANDS = ["info", "simulate", "deconvolve", "deblur", "demo"]
 
 
 def build_parser() -> argparse.ArgumentParser:
