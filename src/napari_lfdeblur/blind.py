@@ -119,6 +119,9 @@ class BlindParams:
         ``lambda`` is multiplied by this after every alternation (floor
         ``l0_weight * l0_floor``).
     l0_floor : float
+    latent_angular_weight : float
+        Weight of the angular (``v, u``) differences in the L0 latent
+        (0: spatial differences only).
     hqs_beta_max : float
         Half-quadratic splitting runs ``beta = 2 lambda * kappa^k`` up to this.
     hqs_kappa : float
@@ -131,6 +134,14 @@ class BlindParams:
     n_pixels : int
         Pixels (chosen at random, favouring strong gradients, with all their
         views) on which the path is fitted to the latent.
+    n_random : int
+        Random cubic paths (within ``+-init_length`` views) tried at the start
+        besides the lines, all fitted at once as a batch.
+    n_perturb : int
+        Randomly perturbed copies of the current path tried at every later
+        alternation (kept only when they fit better).
+    perturb : float
+        Standard deviation of those perturbations, in views.
     tiles : int
         With ``p_z`` estimated, the fit takes the blur kernel constant over
         ``tiles x tiles`` tiles of the image.
@@ -177,12 +188,13 @@ class BlindParams:
     n_levels: int = 1
     min_size: int = 24
     max_size: int = 0
-    n_outer: int = 8
+    n_outer: int = 6
     n_restarts: int = 4
     init_length: float = 1.0
     l0_weight: float = 4e-3
-    l0_decay: float = 1.0
-    l0_floor: float = 0.3
+    l0_decay: float = 0.5
+    l0_floor: float = 0.05
+    latent_angular_weight: float = 0.0
     hqs_beta_max: float = 2.0
     hqs_kappa: float = 2.0
     n_cg: int = 3
@@ -190,6 +202,9 @@ class BlindParams:
     path_steps: int = 300
     path_tol: float = 0.01
     n_pixels: int = 3000
+    n_random: int = 12
+    n_perturb: int = 4
+    perturb: float = 0.3
     tiles: int = 4
     z_box: float = 0.5
     try_mirror: bool = True
@@ -215,7 +230,7 @@ class BlindParams:
             raise ValueError(f"unknown blind method {self.method!r}: choose one of {', '.join(METHODS)}")
         ints = {
             "n_control_points": 2, "n_times": 2, "n_levels": 1, "min_size": 4, "n_outer": 1,
-            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "z_levels": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
+            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "n_random": 0, "n_perturb": 0, "z_levels": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
             "final_n_times": 2, "preview_every": 0,
         }
         for name, lo in ints.items():
@@ -225,7 +240,7 @@ class BlindParams:
             if v < lo:
                 raise ValueError(f"BlindParams.{name} must be >= {lo}; got {v}")
             object.__setattr__(self, name, int(v))
-        nonneg = ("max_extent", "z_box", "init_length", "l0_weight", "l0_floor", "path_tol", "prior_weight",
+        nonneg = ("max_extent", "z_box", "latent_angular_weight", "perturb", "init_length", "l0_weight", "l0_floor", "path_tol", "prior_weight",
                   "prior_floor", "tv_weight", "eps_min")
         positive = ("hqs_beta_max", "path_lr", "lf_lr", "eps", "l0_decay", "prior_decay", "eps_decay")
         for name in nonneg + positive:
@@ -469,27 +484,27 @@ class _PathParam:
         self.n_times = n_times
         self.z_box = box if z_box is None else z_box
         self.box = box
-        mean_row = bernstein_matrix(len(cp0), n_times).mean(axis=0)  # positions mean = mean_row @ cp
+        mean_row = bernstein_matrix(np.shape(cp0)[-2], n_times).mean(axis=0)  # positions mean = mean_row @ cp
         self.mean_row = torch.as_tensor(mean_row, dtype=dtype, device=device)
         self.q = torch.as_tensor(np.asarray(cp0, dtype=np.float64), dtype=dtype, device=device).clone()
         if not free_z:
             with torch.no_grad():
-                self.q[:, 2] = 0.0
+                self.q[..., 2] = 0.0
         self.q.requires_grad_(True)
         if not free_z:
             mask = torch.tensor([1.0, 1.0, 0.0], dtype=dtype, device=device)
             self.q.register_hook(lambda grad: grad * mask)
 
     def control_points(self) -> torch.Tensor:
-        return self.q - self.mean_row @ self.q
+        return self.q - (self.mean_row @ self.q).unsqueeze(-2)
 
     @torch.no_grad()
     def project(self):
         """Re-centre and clamp into the box (in place)."""
-        self.q.sub_(self.mean_row @ self.q)
-        self.q[:, :2].clamp_(-self.box, self.box)
-        self.q[:, 2].clamp_(-self.z_box, self.z_box)
-        self.q.sub_(self.mean_row @ self.q)
+        self.q.sub_((self.mean_row @ self.q).unsqueeze(-2))
+        self.q[..., :2].clamp_(-self.box, self.box)
+        self.q[..., 2].clamp_(-self.z_box, self.z_box)
+        self.q.sub_((self.mean_row @ self.q).unsqueeze(-2))
 
     def numpy(self) -> np.ndarray:
         return self.control_points().detach().cpu().double().numpy()
@@ -631,19 +646,40 @@ def _cg(apply_A, b, x0, n_iter):
 
 @torch.no_grad()
 def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0: torch.Tensor):
-    """Salient-edge latent: ``min ||K l - f||^2 + lam ||grad_yx l||_0`` by half-quadratic splitting."""
+    """Salient-edge latent: ``min ||K l - f||^2 + lam ||grad l||_0`` by half-quadratic splitting.
+
+    The gradient is over ``y, x`` and, with ``latent_angular_weight > 0``,
+    also over ``v, u`` (weighted).
+    """
+    from .priors import divergence4d, gradient4d
+
+    a = p.latent_angular_weight
+    aw = (a, a, 1.0, 1.0)
+    if a > 0:
+        def grad(z):
+            return gradient4d(z, aw)
+
+        def div(g):
+            return divergence4d(g, aw)
+    else:
+        def grad(z):
+            return _grad_yx(z)
+
+        def div(g):
+            return _div_yx(*g)
+
     Ktf = op.adjoint(f)
     x = x0
     beta = 2.0 * lam
     while True:
-        gy, gx = _grad_yx(x)
-        keep = (gy * gy + gx * gx) >= lam / beta
-        gy.mul_(keep)
-        gx.mul_(keep)
-        rhs = Ktf - beta * _div_yx(gy, gx)
+        g = grad(x)
+        keep = sum(c * c for c in g) >= lam / beta
+        for c in g:
+            c.mul_(keep)
+        rhs = Ktf - beta * div(g)
 
         def apply_A(z, beta=beta):
-            return op.adjoint(op.forward(z)) - beta * _div_yx(*_grad_yx(z))
+            return op.adjoint(op.forward(z)) - beta * div(grad(z))
 
         x = _cg(apply_A, rhs, x, p.n_cg)
         if beta >= p.hqs_beta_max:
@@ -807,50 +843,51 @@ class _GramLoss:
         self.G, self.b = G, b
 
     def kernels(self, cp):
-        """The splat kernels of the tiles, (n_tiles, nO*nO)."""
-        pos = bezier_positions(cp, self.T)  # (T, 3)
+        """The splat kernels of the tiles, ([B,] n_tiles, nO*nO) for control points ([B,] n, 3)."""
+        basis = torch.as_tensor(bernstein_matrix(cp.shape[-2], self.T), dtype=cp.dtype, device=cp.device)
+        pos = basis @ cp  # ([B,] T, 3)
         R, nO = self.R, self.nO
-        s_u = pos[None, :, 0] - self.xt[:, None] * pos[None, :, 2]  # (tiles, T)
-        s_v = pos[None, :, 1] - self.yt[:, None] * pos[None, :, 2]
+        s_u = pos[..., None, :, 0] - self.xt[:, None] * pos[..., None, :, 2]  # ([B,] tiles, T)
+        s_v = pos[..., None, :, 1] - self.yt[:, None] * pos[..., None, :, 2]
         s_u = s_u.clamp(-R + 1e-4, R - 1e-4)
         s_v = s_v.clamp(-R + 1e-4, R - 1e-4)
         fu, fv = torch.floor(s_u.detach()), torch.floor(s_v.detach())
         wu, wv = s_u - fu, s_v - fv
         iu, iv = (fu + R).long(), (fv + R).long()
-        K = torch.zeros(s_u.shape[0], nO * nO, dtype=cp.dtype, device=cp.device)
+        K = torch.zeros(s_u.shape[:-1] + (nO * nO,), dtype=cp.dtype, device=cp.device)
         for dv, wvv in ((0, 1 - wv), (1, wv)):
             for du, wuu in ((0, 1 - wu), (1, wu)):
                 idx = ((iv + dv).clamp(max=nO - 1)) * nO + (iu + du).clamp(max=nO - 1)
-                K = K.scatter_add(1, idx, wvv * wuu)
+                K = K.scatter_add(-1, idx, wvv * wuu)
         return K / self.T
 
     def __call__(self, cp):
+        """The fit (up to a constant) of control points ([B,] n, 3): shape ([B,])."""
         K = self.kernels(cp)
-        quad = torch.einsum("ti,tij,tj->", K, self.G, K) - 2.0 * (self.b * K).sum()
+        quad = torch.einsum("...ti,tij,...tj->...", K, self.G, K) - 2.0 * (self.b * K).sum(dim=(-1, -2))
         return quad * self.scale
 
 
 def _fit_path(pp: _PathParam, loss_fn, steps: int, lr: float):
-    """Adam on the path for ``steps`` steps (fewer when it stalls); returns the final loss."""
+    """Adam on a batch of paths for up to ``steps`` steps; returns their final fits, shape (B,)."""
     opt = torch.optim.Adam([pp.q], lr=lr)
     best = float("inf")
     stall = 0
-    loss = float("nan")
     for _ in range(steps):
         opt.zero_grad(set_to_none=True)
-        lt = loss_fn(pp.control_points())
+        lt = loss_fn(pp.control_points()).sum()
         lt.backward()
         opt.step()
         pp.project()
         loss = float(lt.detach())
-        if loss < best * (1 - 1e-4):
+        if loss < best - 1e-6 * abs(best):
             best, stall = loss, 0
         else:
             stall += 1
             if stall >= 10:
                 break
     with torch.no_grad():
-        return float(loss_fn(pp.control_points()))
+        return loss_fn(pp.control_points())
 
 
 def _positions(cp: np.ndarray, n_times: int) -> np.ndarray:
@@ -899,19 +936,23 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
             sub.set_latent(latent)
             if cp is None and outer == 1:
                 candidates = [elevate_degree(c, n_lvl) for c in starts]
+                for _ in range(p.n_random):
+                    c = rng.uniform(-0.5, 0.5, size=(n_lvl, 3)) * p.init_length * 2
+                    c[:, 2] = 0.0
+                    candidates.append(c)
             else:
                 candidates = [cur, -cur] if p.try_mirror else [cur]
-            best = None
-            scores = []
-            for cand in candidates:
-                pp = _PathParam(cand, T, box, device, free_z=free_z, z_box=box * p.z_box)
-                pp.project()
-                loss = _fit_path(pp, sub, p.path_steps, p.path_lr)
-                scores.append(loss)
-                if best is None or loss < best[0]:
-                    best = (loss, pp.numpy())
+                for _ in range(p.n_perturb):
+                    c = cur + rng.normal(0.0, p.perturb, size=cur.shape)
+                    c[:, 2] = cur[:, 2]
+                    candidates.append(c)
+            pp = _PathParam(np.stack(candidates), T, box, device, free_z=free_z, z_box=box * p.z_box)
+            pp.project()
+            scores = _fit_path(pp, sub, p.path_steps, p.path_lr).detach().cpu().numpy()
+            k = int(np.argmin(scores))
+            best = (float(scores[k]), pp.control_points()[k].detach().cpu().double().numpy())
             if cp is None and outer == 1:
-                info["restart_losses"] = scores
+                info["restart_losses"] = scores.tolist()
             loss, new = best
             move = float(np.abs(_positions(new, T) - _positions(cur, T)).max()) if len(new) == len(cur) else 1.0
             cur = new
