@@ -49,6 +49,8 @@ def main(argv=None):
     ap.add_argument("--oracle", action="store_true")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--big", action="store_true",
+                    help="one 9x9x376x541x3 synthetic case (the GPU target), instead of --cases")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     ev = _eval_module()
@@ -59,8 +61,19 @@ def main(argv=None):
     if args.set:
         params = params.replace(**{k: _value(v) for k, v in (s.split("=", 1) for s in args.set)})
     rows = []
-    for name in args.cases.split(","):
-        case = ev.make_case(name)
+    names = ["big"] if args.big else args.cases.split(",")
+    for name in names:
+        if name == "big":
+            from napari_lfdeblur import random_path, simulate_blur, synthetic_scene
+            from napari_lfdeblur.path import center_path
+
+            sharp, _ = synthetic_scene(shape=(9, 9, 376, 541), n_layers=3, color=True, seed=1)
+            cp = center_path(random_path(4, extent=3.0, z_extent=0.0, seed=102), 128)
+            blurred = simulate_blur(sharp, cp, n_times=64, device=args.device)
+            blurred = np.clip(blurred + np.random.default_rng(0).normal(0, 0.002, blurred.shape), 0, 1)
+            case = ev.Case("big", "syn", sharp, blurred.astype(np.float32), cp)
+        else:
+            case = ev.make_case(name)
         t = time.perf_counter()
         res = blind_deblur(case.blurred, params=params, device=args.device, seed=args.seed)
         dt = time.perf_counter() - t
