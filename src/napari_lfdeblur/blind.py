@@ -194,7 +194,7 @@ class BlindParams:
     l0_weight: float = 4e-3
     l0_decay: float = 0.5
     l0_floor: float = 0.05
-    latent_angular_weight: float = 0.0
+    latent_angular_weight: float = 0.5
     hqs_beta_max: float = 2.0
     hqs_kappa: float = 2.0
     n_cg: int = 3
