@@ -327,7 +327,7 @@ def _table(rows: list[dict]) -> list[str]:
                 psnr=_fmt(r.get("psnr"), ".2f"),
                 gain=_fmt(r.get("gain"), "+.2f"),
                 ssim=_fmt(r.get("ssim"), ".4f"),
-                ang=_fmt(r.get("angular"), ".4f"),
+                ang=_fmt(r.get("angular"), ".5f"),
                 bm=_fmt(r.get("blur_mismatch"), ".3f"),
                 ch=_fmt(r.get("chamfer"), ".3f"),
                 rr=_fmt(r.get("rmse_relative"), ".3f"),
@@ -396,7 +396,7 @@ def targets(means: list[dict], quick: bool, rows: list[dict] | None = None) -> l
         check(d["blur_mismatch"] <= 0.2, f"mean blur mismatch ≤ 0.2 (mean {d['blur_mismatch']:.3f})")
     for key, label, better, spec in (
         ("psnr", "PSNR above", np.greater, ".2f"),
-        ("angular", "angular error below", np.less, ".4f"),
+        ("angular", "angular error below", np.less, ".5f"),
     ):
         pair = _paired(rows or [], "default", "baseline2d", key)
         if pair is not None:
