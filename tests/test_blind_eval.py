@@ -6,6 +6,8 @@ import math
 import sys
 from pathlib import Path
 
+import time
+
 import numpy as np
 import pytest
 
@@ -87,5 +89,6 @@ def test_peak_memory_sees_an_allocation(blind_eval):
     with blind_eval.PeakMemory("cpu") as mem:
         a = np.ones(64 * 2**20 // 8)  # 64 MiB, touched
         a += 1
+        time.sleep(0.1)  # the sampler looks every 10 ms: hold the memory long enough to be seen
         del a
     assert 48 < mem.delta_mib < 1024
