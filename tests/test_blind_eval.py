@@ -4,9 +4,8 @@ import importlib.util
 import json
 import math
 import sys
-from pathlib import Path
-
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
