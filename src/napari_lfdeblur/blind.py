@@ -220,7 +220,7 @@ class BlindParams:
     eps_decay: float = 0.997
     eps_min: float = 0.04
     # final non-blind stage
-    tv_weight: float = 0.001
+    tv_weight: float = 0.002
     tv_iter: int = 100
     final_n_times: int = 16
     preview_every: int = 10
