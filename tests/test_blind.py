@@ -249,20 +249,6 @@ def test_sparse_gradient_prior_matches_definition():
     assert float(sparse_gradient_prior(L, eps)) == pytest.approx(ref)
 
 
-def test_subset_blur_equals_operator():
-    torch.manual_seed(0)
-    cp = np.array([[-0.8, 0.3, 0.4], [0.5, -0.6, -0.3], [0.9, 0.7, 0.2]])
-    ys = torch.tensor([0, 3, 11, 5])
-    xs = torch.tensor([0, 15, 7, 2])
-    for d_inf in (0.0, 0.7):
-        L = torch.rand(5, 5, 12, 16, 1, dtype=torch.float64)
-        op = BlurOperator(L.shape, cp, n_times=6, infinity_disparity=d_inf, device="cpu", dtype=torch.float64)
-        full = op.forward(L)[:, :, ys, xs]
-        pos = bezier_positions(torch.tensor(cp), 6)
-        sub = blind._subset_blur(L if d_inf else L[:, :, ys, xs], ys, xs, pos, d_inf, L.shape)
-        torch.testing.assert_close(sub, full)
-
-
 def test_gram_loss_equals_direct_fit_up_to_a_constant():
     torch.manual_seed(1)
     f = torch.rand(5, 5, 20, 24, 1, dtype=torch.float64)

@@ -688,67 +688,6 @@ def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0
     return x
 
 
-def _subset_blur(L, ys, xs, positions, d_inf, full_shape):
-    """The blur of MODEL.md evaluated at a subset of pixels only.
-
-    Parameters
-    ----------
-    L : torch.Tensor, shape (V, U, Y, X, C) when ``d_inf != 0``, else (V, U, N, C)
-        The sharp light field (or, with ``d_inf = 0``, its samples at the N pixels).
-    ys, xs : torch.Tensor of int64, shape (N,)
-        The pixels.
-    positions : torch.Tensor, shape (T, 3)
-        Path positions at the instants (differentiable).
-    d_inf : float
-    full_shape : tuple, (V, U, Y, X, ...) of the whole light field (for ``x~, y~``)
-
-    Returns
-    -------
-    torch.Tensor, shape (V, U, N, C)
-        Equal to ``BlurOperator(...).forward(L)[:, :, ys, xs]``.
-    """
-    V, U, Y, X = full_shape[:4]
-    T = positions.shape[0]
-    dt = positions.dtype
-    C = L.shape[-1]
-    r = max(X, Y) / 2.0
-    xt = (xs.to(dt) - (X - 1) / 2.0) / r
-    yt = (ys.to(dt) - (Y - 1) / 2.0) / r
-    s_u = positions[None, :, 0] - xt[:, None] * positions[None, :, 2]  # (N, T)
-    s_v = positions[None, :, 1] - yt[:, None] * positions[None, :, 2]
-    N = ys.shape[0]
-    A = _interp_matrices(s_u, U).to(L.dtype)  # (N, T, U, U): output a reads a + s_u
-    Bm = _interp_matrices(s_v, V).to(L.dtype)  # (N, T, V, V)
-    if d_inf == 0.0:
-        # (N, C*V, U) @ (N, U, T*U) -> (N, C*V, T*U)
-        Ls = L.permute(2, 3, 0, 1).reshape(N, C * V, U)
-        tmp = torch.bmm(Ls, A.permute(0, 3, 1, 2).reshape(N, U, T * U))
-        tmp = tmp.reshape(N, C, V, T, U).permute(0, 3, 2, 1, 4)  # (N, T, V, C, U)
-    else:
-        y0, y1, wy = _lerp_taps(ys[:, None].to(dt) + d_inf * s_v, Y)
-        x0, x1, wx = _lerp_taps(xs[:, None].to(dt) + d_inf * s_u, X)
-        wy, wx = wy[..., None].to(L.dtype), wx[..., None].to(L.dtype)
-        Ls = ((L[:, :, y0, x0] * (1 - wx) + L[:, :, y0, x1] * wx) * (1 - wy)
-              + (L[:, :, y1, x0] * (1 - wx) + L[:, :, y1, x1] * wx) * wy)  # (V, U, N, T, C)
-        Ls = Ls.permute(2, 3, 4, 0, 1).reshape(N * T, C * V, U)
-        tmp = torch.bmm(Ls, A.reshape(N * T, U, U).transpose(1, 2))  # (N*T, C*V, U)
-        tmp = tmp.reshape(N, T, C, V, U).permute(0, 1, 3, 2, 4)  # (N, T, V, C, U)
-    # along v: (N*T, V, V) @ (N*T, V, C*U)
-    out = torch.bmm(Bm.reshape(N * T, V, V), tmp.reshape(N * T, V, C * U))
-    out = out.reshape(N, T, V, C, U).mean(dim=1)  # (N, V, C, U)
-    return out.permute(1, 3, 0, 2)
-
-
-def _interp_matrices(shift: torch.Tensor, size: int) -> torch.Tensor:
-    """Clamped bilinear interpolation matrices ``M[..., a, b]``: output ``a`` reads ``a + shift``."""
-    target = torch.arange(size, dtype=shift.dtype, device=shift.device)
-    i0, i1, w = _lerp_taps(shift[..., None] + target, size)
-    cols = torch.arange(size, device=shift.device)
-    m0 = (i0[..., None] == cols).to(shift.dtype)
-    m1 = (i1[..., None] == cols).to(shift.dtype)
-    return m0 + w[..., None] * (m1 - m0)
-
-
 class _GramLoss:
     """The gradient-domain path fit ``sum ||grad_yx(K_p l) - grad_yx f||^2`` as a quadratic form.
 
