@@ -57,9 +57,9 @@ import numpy as np
 import torch
 
 from ._progress import Progress, run_to_completion
-from .blur import BlurOperator, _lerp_taps, from_tensor, validate_lightfield
+from .blur import BlurOperator, _lerp_taps, validate_lightfield
 from .devices import select_device
-from .path import bernstein_matrix, bezier_positions, center_path, validate_control_points
+from .path import bernstein_matrix, bezier_positions, center_path
 
 __all__ = [
     "BlindParams",
