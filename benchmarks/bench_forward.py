@@ -93,7 +93,7 @@ def _sync(device):
         torch.cuda.synchronize()
 
 
-def run_variant(variant, shape, n_times, device, repeats):
+def run_variant(variant, shape, n_times, device, repeats, block_elements=None):
     device = select_device(device)
     torch.manual_seed(0)
     L = torch.rand(shape, device=device)
@@ -103,7 +103,7 @@ def run_variant(variant, shape, n_times, device, repeats):
 
     def forward(L, cp):
         if variant == "ours":
-            return BlurOperator(shape, cp, n_times=n_times, device=device).forward(L)
+            return BlurOperator(shape, cp, n_times=n_times, device=device, block_elements=block_elements).forward(L)
         return gridsample_blur(L, cp, n_times)
 
     def fwd_bwd():
@@ -158,19 +158,24 @@ def main(argv=None):
     parser.add_argument("--n-times", type=int, default=16)
     parser.add_argument("--device", default="auto")
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--block-elements", type=int, default=None, help="block size of ours (default: per device)")
+    parser.add_argument("--variants", nargs="+", default=["ours", "grid_sample"], choices=["ours", "grid_sample"])
     parser.add_argument("--variant", choices=["ours", "grid_sample"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     shape = tuple(args.shape)
     if args.variant:  # child process: one measurement, as JSON
-        print(json.dumps(run_variant(args.variant, shape, args.n_times, args.device, args.repeats)))
+        print(json.dumps(run_variant(args.variant, shape, args.n_times, args.device, args.repeats,
+                                     args.block_elements)))
         return
     device = select_device(args.device)
     print(f"blur operator, {shape} float32, T = {args.n_times}, device {device}, torch {torch.__version__}, "
           f"{torch.get_num_threads()} threads")
     rows = []
-    for variant in ("ours", "grid_sample"):
+    for variant in args.variants:
         cmd = [sys.executable, __file__, "--variant", variant, "--shape", *map(str, shape),
                "--n-times", str(args.n_times), "--device", str(device), "--repeats", str(args.repeats)]
+        if args.block_elements:
+            cmd += ["--block-elements", str(args.block_elements)]
         res = subprocess.run(cmd, capture_output=True, text=True)
         if res.returncode != 0:
             print(f"{variant} failed:\n{res.stderr[-2000:]}")

@@ -48,9 +48,12 @@ __all__ = [
     "interpolation_matrices",
 ]
 
-#: elements of temporary memory one block may use (float32: 4 bytes each): small
-#: enough to stay in a CPU cache; on a GPU large blocks mean fewer kernel launches
-DEFAULT_BLOCK_ELEMENTS = {"cpu": 1 << 19, "cuda": 1 << 24}
+#: elements of temporary memory one block may use (float32: 4 bytes each). Blocks
+#: of a few MB keep the per-call overhead of torch (and the wait for OpenMP
+#: threads on a busy machine) small against the work: measured at 9x9x376x541x3,
+#: 2 cores, 2**22 was as fast as 2**19 on an idle machine and 6x faster than it
+#: on a loaded one. On a GPU larger blocks mean fewer kernel launches.
+DEFAULT_BLOCK_ELEMENTS = {"cpu": 1 << 22, "cuda": 1 << 24}
 
 
 # ----------------------------------------------------------------- arrays
