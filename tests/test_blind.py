@@ -172,12 +172,95 @@ def test_generator_yields_progress_and_closes_promptly(monkeypatch):
     first = next(gen)
     second = next(gen)
     assert first.stage.startswith("path") and first.control_points.shape[1] == 3
-    assert np.isfinite(first.loss) and second.iteration == first.iteration + 1
+    assert second.iteration == first.iteration + 1
+    # the loss is the fit at the end of an alternation (NaN on the reports inside one)
+    rec = next(r for r in gen if r.info.get("phase") == "done")
+    assert np.isfinite(rec.loss) and rec.iteration == rec.n_iterations // 50
     done = calls["n"]
     gen.close()
     assert calls["n"] <= done + 1
     with pytest.raises(StopIteration):
         next(gen)
+
+
+def _count_blur_calls(monkeypatch):
+    """Count BlurOperator.forward / adjoint calls (the bulk of the work of the path stage)."""
+    count = {"n": 0}
+    for name in ("forward", "adjoint"):
+        real = getattr(BlurOperator, name)
+
+        def counted(self, *a, _real=real, **k):
+            count["n"] += 1
+            return _real(self, *a, **k)
+
+        monkeypatch.setattr(BlurOperator, name, counted)
+    return count
+
+
+def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatch):
+    lf = _scene((5, 5, 20, 20), seed=4)
+    blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
+    count = _count_blur_calls(monkeypatch)
+    p = BlindParams().replace(n_outer=3, path_tol=0.0, path_steps=60, tv_iter=0, preview_every=4)
+    gen = iter_blind_deblur(blurred, params=p, device="cpu")
+    work, records, last = [], [], 0
+    for rec in gen:
+        work.append(count["n"] - last)
+        last = count["n"]
+        records.append(rec)
+    total = count["n"]
+    assert all(r.stage.startswith("path") for r in records)
+    # the work is split finely: many records, none after more than a small part of it
+    assert len(records) >= 10
+    assert {r.info["phase"] for r in records} == {"latent", "path fit", "done"}
+    assert total > 0 and max(work) < 0.25 * total
+    # every record carries the path; the progress only grows
+    for r in records:
+        assert r.control_points.shape == (4, 3)
+        assert np.all(np.isfinite(r.control_points))
+        assert 1 <= r.iteration <= r.n_iterations and r.n_stages == 2 and r.stage_index == 0
+    keys = [(r.stage_index, r.iteration) for r in records]
+    assert keys == sorted(keys) and len(set(keys)) == len(keys)
+    fractions = [r.fraction for r in records]
+    assert fractions == sorted(fractions) and fractions[-1] <= 0.5 + 1e-9
+    # a light-field preview on every preview_every-th record, of the input's shape, in [0, 1]
+    with_preview = [i for i, r in enumerate(records, 1) if r.preview is not None]
+    assert with_preview == list(range(p.preview_every, len(records) + 1, p.preview_every))
+    for i in with_preview:
+        prev = records[i - 1].preview
+        assert prev.shape == blurred.shape and prev.dtype == np.float32
+        assert prev.min() >= 0.0 and prev.max() <= 1.0
+
+
+def test_close_stops_the_work_at_once(monkeypatch):
+    lf = _scene((5, 5, 20, 20), seed=4)
+    blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
+    count = _count_blur_calls(monkeypatch)
+    gen = iter_blind_deblur(blurred, params=BlindParams().replace(n_outer=50, path_tol=0.0), device="cpu")
+    for _ in range(3):
+        next(gen)
+    done = count["n"]
+    assert done > 0
+    gen.close()
+    assert count["n"] == done
+    with pytest.raises(StopIteration):
+        next(gen)
+
+
+def test_path_stage_preview_matches_colour_input_and_undoes_the_refocus():
+    lf = _scene((5, 5, 16, 16), seed=2)[..., None].repeat(3, axis=-1)
+    blurred = simulate_blur(lf, linear_path(1.0), n_times=8, infinity_disparity=0.5)
+    p = BlindParams().replace(n_outer=1, path_steps=20, tv_iter=0, n_restarts=1, preview_every=1)
+    first = next(iter_blind_deblur(blurred, infinity_disparity=0.5, params=p, device="cpu"))
+    prev = first.preview
+    assert prev.shape == blurred.shape and prev.dtype == np.float32
+    np.testing.assert_array_equal(prev[..., 0], prev[..., 2])  # grayscale estimate on every channel
+    # the latent is of the refocused light field: the preview is back in the input's frame
+    gray = blurred.mean(-1)
+    err = np.abs(prev[..., 0] - gray)[:, :, 3:-3, 3:-3].mean()
+    sheared = blind._shear(torch.as_tensor(gray)[..., None], 0.5)[..., 0].numpy()
+    err_sheared = np.abs(prev[..., 0] - sheared)[:, :, 3:-3, 3:-3].mean()
+    assert err < err_sheared
 
 
 # ------------------------------------------------------------ parameters

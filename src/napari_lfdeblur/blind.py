@@ -644,12 +644,25 @@ def _cg(apply_A, b, x0, n_iter):
     return x
 
 
-@torch.no_grad()
+def _n_hqs_steps(lam: float, p: BlindParams) -> int:
+    """Splitting steps :func:`_l0_latent` takes for ``lam`` (counted as its loop does)."""
+    beta, n = 2.0 * lam, 1
+    while 0 < beta < p.hqs_beta_max:
+        beta = min(beta * p.hqs_kappa, p.hqs_beta_max)
+        n += 1
+    return n
+
+
+@torch.no_grad()  # torch's decorator enters no_grad at every resume of the generator only
 def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0: torch.Tensor):
     """Salient-edge latent: ``min ||K l - f||^2 + lam ||grad l||_0`` by half-quadratic splitting.
 
     The gradient is over ``y, x`` and, with ``latent_angular_weight > 0``,
     also over ``v, u`` (weighted).
+
+    A generator: yields the current latent after every splitting step but
+    the last (the caller reports progress there, and can be stopped there)
+    and returns the latent, (V, U, Y, X, 1) float32.
     """
     from .priors import divergence4d, gradient4d
 
@@ -684,6 +697,7 @@ def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0
         x = _cg(apply_A, rhs, x, p.n_cg)
         if beta >= p.hqs_beta_max:
             break
+        yield x
         beta = min(beta * p.hqs_kappa, p.hqs_beta_max)
     return x
 
@@ -807,18 +821,30 @@ class _GramLoss:
         return quad * self.scale
 
 
-def _fit_path(pp: _PathParam, loss_fn, steps: int, lr: float):
-    """Adam on a batch of paths for up to ``steps`` steps; returns their final fits, shape (B,)."""
+#: Adam steps of the path fit between two progress reports
+FIT_REPORT_EVERY = 10
+
+
+def _fit_path(pp: _PathParam, loss_fn, steps: int, lr: float, every: int = FIT_REPORT_EVERY):
+    """Adam on a batch of paths for up to ``steps`` steps; returns their final fits, shape (B,).
+
+    A generator: every ``every`` steps it yields ``(step, fit, control_points)``,
+    the best current fit of the batch and its control points ((n, 3) float64).
+    """
     opt = torch.optim.Adam([pp.q], lr=lr)
     best = float("inf")
     stall = 0
-    for _ in range(steps):
+    for step in range(1, steps + 1):
         opt.zero_grad(set_to_none=True)
-        lt = loss_fn(pp.control_points()).sum()
+        each = loss_fn(pp.control_points())
+        lt = each.sum()
         lt.backward()
         opt.step()
         pp.project()
         loss = float(lt.detach())
+        if step % every == 0 and step < steps:
+            k = int(torch.argmin(each.detach()))
+            yield step, float(each[k].detach()), pp.numpy().reshape(-1, *pp.q.shape[-2:])[k]
         if loss < best - 1e-6 * abs(best):
             best, stall = loss, 0
         else:
@@ -833,8 +859,17 @@ def _positions(cp: np.ndarray, n_times: int) -> np.ndarray:
     return bezier_positions(cp, n_times)
 
 
-def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info):
-    """Coarse-to-fine salient-edge / path alternation on the grayscale ``g`` (V, U, Y, X, 1)."""
+def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info, make_preview=None):
+    """Coarse-to-fine salient-edge / path alternation on the grayscale ``g`` (V, U, Y, X, 1).
+
+    Yields a record after every splitting step of the latent, every
+    :data:`FIT_REPORT_EVERY` steps of the path fit and at the end of every
+    alternation. ``iteration`` counts these reports within a level, out of
+    ``n_iterations = n_outer * per_alternation`` (an alternation that ends
+    early jumps to its end), so that the fraction done only grows.
+    ``make_preview(latent, factor)``, when given, makes the preview sent with
+    every ``preview_every``-th record.
+    """
     V, U, Y, X, _ = g.shape
     # pyramid: factors 2^k with the smallest side >= min_size
     top = 1
@@ -856,6 +891,23 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
         starts.append(np.stack([-d, d]))
     cp = None
     lam0 = p.l0_weight
+    # reports per alternation: latent steps (at most those at the smallest lambda), fit reports, the end
+    lam_min = min(p.l0_weight, p.l0_weight * p.l0_floor)
+    per_outer = (_n_hqs_steps(lam_min, p) - 1) + (p.path_steps - 1) // FIT_REPORT_EVERY + 1
+    n_records = 0
+
+    def record(stage, fac, it, cur, latent, loss=float("nan"), **extra):
+        nonlocal n_records
+        n_records += 1
+        preview = None
+        if make_preview is not None and p.preview_every and n_records % p.preview_every == 0:
+            preview = make_preview(latent, fac)
+        return Progress(
+            stage=f"path (level {stage + 1}/{n_stages}, {Y // fac}x{X // fac})",
+            iteration=it, n_iterations=p.n_outer * per_outer, loss=loss, control_points=np.array(cur),
+            preview=preview, stage_index=stage, n_stages=n_stages + 1, info={"level": stage, "factor": fac, **extra},
+        )
+
     for stage, fac in enumerate(factors):
         f = _downsample(g, fac)
         shape = tuple(f.shape)
@@ -870,8 +922,19 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
             cur[:, 2] = 0.0
         still = 0
         for outer in range(1, p.n_outer + 1):
+            base = (outer - 1) * per_outer
+            tick = 0
             op = BlurOperator(shape, cur, n_times=T, infinity_disparity=d_lvl, device=device)
-            latent = _l0_latent(op, f, lam, p, latent)
+            gen, x = _l0_latent(op, f, lam, p, latent), None
+            while True:
+                try:
+                    x = next(gen)
+                except StopIteration as stop:
+                    latent = stop.value
+                    break
+                tick = min(tick + 1, per_outer - 1)
+                yield record(stage, fac, base + tick, cur, x, alternation=outer, phase="latent", **{"lambda": lam})
+            del gen, x, op
             sub.set_latent(latent)
             if cp is None and outer == 1:
                 candidates = [elevate_degree(c, n_lvl) for c in starts]
@@ -887,7 +950,17 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
                     candidates.append(c)
             pp = _PathParam(np.stack(candidates), T, box, device, free_z=free_z, z_box=box * p.z_box)
             pp.project()
-            scores = _fit_path(pp, sub, p.path_steps, p.path_lr).detach().cpu().numpy()
+            gen = _fit_path(pp, sub, p.path_steps, p.path_lr)
+            while True:
+                try:
+                    step, fit, shown = next(gen)
+                except StopIteration as stop:
+                    scores = stop.value.detach().cpu().numpy()
+                    break
+                tick = min(tick + 1, per_outer - 1)
+                yield record(stage, fac, base + tick, shown, latent, alternation=outer, phase="path fit",
+                             step=step, fit=fit, **{"lambda": lam})
+            del gen
             k = int(np.argmin(scores))
             best = (float(scores[k]), pp.control_points()[k].detach().cpu().double().numpy())
             if cp is None and outer == 1:
@@ -897,12 +970,8 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
             cur = new
             history.append(loss)
             lam = max(lam * p.l0_decay, p.l0_weight * p.l0_floor)
-            yield Progress(
-                stage=f"path (level {stage + 1}/{n_stages}, {Y // fac}x{X // fac})",
-                iteration=outer, n_iterations=p.n_outer, loss=loss, control_points=cur,
-                stage_index=stage, n_stages=n_stages + 1,
-                info={"level": stage, "factor": fac, "lambda": lam, "move": move},
-            )
+            yield record(stage, fac, outer * per_outer, cur, latent, loss=loss, alternation=outer, phase="done",
+                         move=move, **{"lambda": lam})
             still = still + 1 if move < p.path_tol else 0
             if still >= 2:
                 break
@@ -911,8 +980,8 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
     return elevate_degree(cp, n_cp), factors
 
 
-def _iter_joint(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info):
-    """The paper's joint Adam on path and grayscale light field."""
+def _iter_joint(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info, make_preview=None):
+    """The paper's joint Adam on path and grayscale light field (one record per iteration)."""
     shape = tuple(g.shape)
     cp0 = rng.uniform(-0.25, 0.25, size=(n_cp, 3))
     cp0[:, 2] = 0.0
@@ -932,8 +1001,11 @@ def _iter_joint(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info)
         opt.step()
         pp.project()
         history.append(float(loss.detach()))
+        preview = None
+        if make_preview is not None and p.preview_every and it % p.preview_every == 0:
+            preview = make_preview(L, 1)
         yield Progress(stage="path (joint)", iteration=it, n_iterations=p.n_iter, loss=history[-1],
-                       control_points=pp.numpy(), stage_index=0, n_stages=2,
+                       control_points=pp.numpy(), preview=preview, stage_index=0, n_stages=2,
                        info={"prior_weight": w, "eps": eps})
     return pp.numpy(), [1]
 
@@ -951,15 +1023,25 @@ def iter_blind_deblur(
     """Blind deblurring as a generator: yields progress, returns a :class:`BlindResult`.
 
     Takes the arguments of :func:`blind_deblur`. Arguments are checked when
-    the generator is created; closing it stops the work at the next yield
-    (at most one path alternation or one TV iteration later).
+    the generator is created; closing it stops the work at the next yield:
+    records come after every splitting step of the latent (a few blur
+    operator applications), every :data:`FIT_REPORT_EVERY` Adam steps of the
+    path fit, every alternation and every TV iteration.
 
     Yields
     ------
     Progress
         ``stage`` names the stage (``'path (level i/n, YxX)'``, ``'final'``),
-        ``control_points`` the current path, ``preview`` now and then the
-        current light field estimate.
+        ``control_points`` the current path (in every record), ``preview``
+        on every ``params.preview_every``-th record the current light-field
+        estimate (input shape, float32; in the path stage the grayscale
+        salient-edge latent, upsampled and repeated over the channels).
+        In the path stage ``iteration`` counts the records of the level out
+        of ``n_iterations`` (an alternation ending early jumps to its end);
+        ``loss`` is the path fit at the end of an alternation
+        (``info['phase'] == 'done'``) and NaN on the records inside one
+        (``info['phase']`` ``'latent'`` or ``'path fit'``, with the current
+        best fit in ``info['fit']``).
 
     Returns
     -------
@@ -1022,6 +1104,30 @@ def _empty_cache(dev):
         torch.cuda.empty_cache()
 
 
+@torch.no_grad()
+def _preview(latent: torch.Tensor, fac: int, shape, unshear: float) -> np.ndarray:
+    """A path-stage latent (V, U, y, x, 1) at level ``fac`` as a preview of the input's ``shape``.
+
+    Nearest upsampling (edge-padded to the full size), the refocus of the
+    path stage undone when ``unshear`` is not 0, clipped to [0, 1] and
+    repeated over the colour channels: float32, ``shape``.
+    """
+    V, U, Y, X = shape[:4]
+    lat = latent.detach()[..., 0]
+    if fac > 1:
+        lat = lat.repeat_interleave(fac, dim=2).repeat_interleave(fac, dim=3)
+    y, x = lat.shape[2:4]
+    if (y, x) != (Y, X):
+        lat = torch.nn.functional.pad(lat.reshape(V * U, 1, y, x), (0, X - x, 0, Y - y), mode="replicate")
+        lat = lat.reshape(V, U, Y, X)
+    if unshear != 0.0:
+        lat = _shear(lat[..., None], -unshear)[..., 0]
+    out = lat.clamp(0.0, 1.0).to(device="cpu", dtype=torch.float32).numpy()
+    if len(shape) == 5:
+        out = np.repeat(out[..., None], shape[4], axis=-1)
+    return np.ascontiguousarray(out, dtype=np.float32)
+
+
 def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points):
     t0 = time.perf_counter()
     torch.manual_seed(seed)
@@ -1035,16 +1141,21 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points):
     g = _gray(f).contiguous()
     history: list = []
     info: dict = {"device": str(dev), "box": box}
+    sheared = p.method == "alternating" and d_inf != 0.0
+
+    def make_preview(latent, fac):
+        return _preview(latent, fac, arr.shape, d_inf if sheared else 0.0)
+
     if p.method == "alternating":
-        if d_inf != 0.0:
+        if sheared:
             g = _shear(g, d_inf)  # the path fit then uses the d_inf = 0 model
-        cp, factors = yield from _iter_alternating(g, 0.0, p, dev, rng, n_cp, box, history, info)
+        cp, factors = yield from _iter_alternating(g, 0.0, p, dev, rng, n_cp, box, history, info, make_preview)
     else:
-        cp, factors = yield from _iter_joint(g, d_inf, p, dev, rng, n_cp, box, history, info)
+        cp, factors = yield from _iter_joint(g, d_inf, p, dev, rng, n_cp, box, history, info, make_preview)
     info["levels"] = [(arr.shape[2] // k, arr.shape[3] // k) for k in factors]
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
-    del g
+    del g, f
     # final non-blind stage, all channels at once
     if p.tv_iter > 0:
         from .deconvolution import iter_deconvolve
