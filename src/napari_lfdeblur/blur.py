@@ -46,6 +46,8 @@ __all__ = [
     "from_tensor",
     "normalized_coordinates",
     "interpolation_matrices",
+    "angular_shifts",
+    "tap_kernel",
 ]
 
 #: elements of temporary memory one block may use (float32: 4 bytes each). Blocks
@@ -136,6 +138,30 @@ def _interp_matrices(shift: torch.Tensor, size: int) -> torch.Tensor:
     return (1.0 - w)[..., None] * m0 + w[..., None] * m1
 
 
+def angular_shifts(positions: torch.Tensor, shape):
+    """``s_u(x, t_k) = p_x - x~ p_z`` and ``s_v(y, t_k) = p_y - y~ p_z`` (MODEL.md).
+
+    Parameters
+    ----------
+    positions : torch.Tensor, shape (T, 3)
+    shape : tuple
+        ``(V, U, Y, X, ...)`` of the light field.
+
+    Returns
+    -------
+    s_u : torch.Tensor, shape (T, X)
+    s_v : torch.Tensor, shape (T, Y)
+    """
+    Y, X = shape[2], shape[3]
+    r = max(X, Y) / 2.0
+    xt = normalized_coordinates(X, r, positions.dtype, positions.device)
+    yt = normalized_coordinates(Y, r, positions.dtype, positions.device)
+    return (
+        positions[:, 0:1] - xt[None, :] * positions[:, 2:3],
+        positions[:, 1:2] - yt[None, :] * positions[:, 2:3],
+    )
+
+
 def interpolation_matrices(positions: torch.Tensor, shape):
     """The angular interpolation matrices of every instant.
 
@@ -156,13 +182,8 @@ def interpolation_matrices(positions: torch.Tensor, shape):
     s_u : torch.Tensor, shape (T, X)
     s_v : torch.Tensor, shape (T, Y)
     """
-    V, U, Y, X = shape[:4]
-    r = max(X, Y) / 2.0
-    xt = normalized_coordinates(X, r, positions.dtype, positions.device)
-    yt = normalized_coordinates(Y, r, positions.dtype, positions.device)
-    s_u = positions[:, 0:1] - xt[None, :] * positions[:, 2:3]
-    s_v = positions[:, 1:2] - yt[None, :] * positions[:, 2:3]
-    return _interp_matrices(s_u, U), _interp_matrices(s_v, V), s_u, s_v
+    s_u, s_v = angular_shifts(positions, shape)
+    return _interp_matrices(s_u, shape[1]), _interp_matrices(s_v, shape[0]), s_u, s_v
 
 
 # --------------------------------------------- angular blur as offset taps
@@ -436,13 +457,9 @@ class BlurOperator:
             block_elements = DEFAULT_BLOCK_ELEMENTS.get(self.device.type, DEFAULT_BLOCK_ELEMENTS["cpu"])
         self.block_elements = int(block_elements)
         self.positions = bezier_positions(cp, self.n_times)
-        V, U, Y, X = self.shape[:4]
-        r = max(X, Y) / 2.0
-        xt = normalized_coordinates(X, r, dtype, self.device)
-        yt = normalized_coordinates(Y, r, dtype, self.device)
+        V, U = self.shape[:2]
         #: angular shifts s_u (T, X) and s_v (T, Y) of every instant
-        self.s_u = self.positions[:, 0:1] - xt[None, :] * self.positions[:, 2:3]
-        self.s_v = self.positions[:, 1:2] - yt[None, :] * self.positions[:, 2:3]
+        self.s_u, self.s_v = angular_shifts(self.positions, self.shape)
         if self.infinity_disparity == 0.0:
             # one kernel for the whole exposure
             self._kernels = [tap_kernel(self.s_u, self.s_v, U, V)]
