@@ -2,6 +2,7 @@
 
 import json
 import warnings
+import weakref
 
 import numpy as np
 import pytest
@@ -393,11 +394,20 @@ def test_out_of_memory_mid_run_falls_back_and_releases(monkeypatch):
     released = []
     devices_run = []
 
+    class Buffer:  # stands for a GPU tensor of the failed run
+        pass
+
+    gpu_buffers = []
+
     def fake_run(arr, d_inf, p, dev, seed, n_cp):
         devices_run.append(dev.type)
         yield "progress"
         if dev.type == "cuda":
+            buf = Buffer()
+            gpu_buffers.append(weakref.ref(buf))
             raise torch.cuda.OutOfMemoryError("CUDA out of memory. Tried to allocate 2 GiB")
+        # the failed run's frame (and its tensors) is gone before the CPU run starts
+        assert gpu_buffers[0]() is None
         return "done on cpu"
 
     monkeypatch.setattr(blind, "_run", fake_run)

@@ -1089,18 +1089,23 @@ def _run_with_fallback(arr, d_inf, p, dev, seed, n_control_points):
     except torch.cuda.OutOfMemoryError as exc:
         if dev.type != "cuda":
             raise
-        _empty_cache(dev)
-        warnings.warn(f"the GPU ran out of memory ({str(exc).splitlines()[0]}); starting again on the CPU",
-                      RuntimeWarning, stacklevel=2)
-        result = yield from _run(arr, d_inf, p, torch.device("cpu"), seed, n_control_points)
-        return result
+        # leave the except block before going on: its traceback holds the failed run's frames,
+        # and with them its GPU tensors
+        message = str(exc).splitlines()[0] if str(exc) else "out of memory"
     finally:
         _empty_cache(dev)
+    warnings.warn(f"the GPU ran out of memory ({message}); starting again on the CPU", RuntimeWarning, stacklevel=2)
+    result = yield from _run(arr, d_inf, p, torch.device("cpu"), seed, n_control_points)
+    return result
 
 
 def _empty_cache(dev):
-    """Release cached GPU memory (a no-op on the CPU)."""
+    """Release cached GPU memory and cuBLAS workspaces (a no-op on the CPU)."""
     if dev.type == "cuda" and torch.cuda.is_available():  # pragma: no cover - needs a GPU
+        torch.cuda.synchronize(dev)
+        clear = getattr(torch._C, "_cuda_clearCublasWorkspaces", None)  # held by the caching allocator
+        if clear is not None:
+            clear()
         torch.cuda.empty_cache()
 
 
