@@ -502,6 +502,27 @@ def render(rows, means, methods, skipped, args, env) -> str:
 # ------------------------------------------------------------------- main
 
 
+def write(rows, run, methods, skipped, args, env, output, *, final, n_done=0, n_all=0):
+    """Render the report; print and write it (and the JSON) when final, only write it when partial."""
+    env["load_end"] = _loadavg()
+    means = summarise(rows, run)
+    text = render(rows, means, methods, skipped, args, env)
+    if not final:
+        head, _, rest = text.partition("\n\n")
+        text = f"{head}\n\n**Partial: {n_done} of {n_all} cases done; the run is still going or was cut short.**\n\n{rest}"
+    else:
+        print(text)
+    if output is not None:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        output.write_text(text + "\n")
+        if final:
+            print(f"wrote {output}", file=sys.stderr)
+    if args.json:
+        Path(args.json).write_text(
+            json.dumps({"env": env, "rows": rows, "means": means, "skipped": skipped, "final": final}, indent=1)
+        )
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="tiny sizes, one case: a smoke run")
@@ -582,17 +603,10 @@ def main(argv=None) -> int:
                 + (f", mismatch {row['blur_mismatch']:.3f}" if row.get("blur_mismatch") is not None else "")
             )
             print(f"    {m}: {msg}", file=sys.stderr)
+        if name != names[-1]:  # a partial report after each case, in case the run is cut short
+            write(rows, run, methods, skipped, args, env, output, final=False, n_done=names.index(name) + 1, n_all=len(names))
 
-    env["load_end"] = _loadavg()
-    means = summarise(rows, run)
-    text = render(rows, means, methods, skipped, args, env)
-    print(text)
-    if output is not None:
-        output.parent.mkdir(parents=True, exist_ok=True)
-        output.write_text(text + "\n")
-        print(f"wrote {output}", file=sys.stderr)
-    if args.json:
-        Path(args.json).write_text(json.dumps({"env": env, "rows": rows, "means": means, "skipped": skipped}, indent=1))
+    write(rows, run, methods, skipped, args, env, output, final=True)
     return 0
 
 

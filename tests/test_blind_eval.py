@@ -39,6 +39,18 @@ def test_quick_run_writes_a_table(blind_eval, tmp_path, capsys):
     assert base["seconds"] > 0 and "blur_mismatch" not in base  # the 2D baseline estimates no path
 
 
+def test_partial_report_is_marked(blind_eval, tmp_path):
+    import argparse
+
+    args = argparse.Namespace(quick=False, cases_for=[], note=[], json=None)
+    env = {"machine": "m", "device": "cpu", "torch": "t", "threads": 1, "date": "d", "command": "c", "load_start": "0"}
+    rows = [{"case": "syn-p1", "method": "input (blurred)", "psnr": 30.0}]
+    out = tmp_path / "partial.md"
+    blind_eval.write(rows, [], ["baseline2d"], {}, args, env, out, final=False, n_done=1, n_all=6)
+    text = out.read_text()
+    assert "**Partial: 1 of 6 cases done" in text and "| syn-p1 | input (blurred) | 30.00 |" in text
+
+
 def test_case_ground_truth_is_in_the_zero_mean_gauge(blind_eval):
     from napari_lfdeblur import bezier_positions, simulate_blur
 
