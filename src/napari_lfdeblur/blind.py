@@ -626,11 +626,16 @@ def _downsample(f: torch.Tensor, factor: int) -> torch.Tensor:
 
 
 def _cg(apply_A, b, x0, n_iter):
-    """Conjugate gradients for a symmetric positive (semi-)definite ``apply_A``."""
+    """Conjugate gradients for a symmetric positive (semi-)definite ``apply_A``.
+
+    A generator: yields the iterate after every application of ``apply_A``
+    (a point where the caller may stop), returns the solution.
+    """
     x = x0.clone()
     r = b - apply_A(x)
     p = r.clone()
     rr = float((r * r).sum())
+    yield x
     for _ in range(n_iter):
         if rr <= 1e-20:
             break
@@ -641,6 +646,7 @@ def _cg(apply_A, b, x0, n_iter):
         rr_new = float((r * r).sum())
         p.mul_(rr_new / rr).add_(r)
         rr = rr_new
+        yield x
     return x
 
 
@@ -660,9 +666,10 @@ def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0
     The gradient is over ``y, x`` and, with ``latent_angular_weight > 0``,
     also over ``v, u`` (weighted).
 
-    A generator: yields the current latent after every splitting step but
-    the last (the caller reports progress there, and can be stopped there)
-    and returns the latent, (V, U, Y, X, 1) float32.
+    A generator: yields the current latent after every conjugate-gradient
+    iteration (``n_cg + 1`` per splitting step; the caller reports progress
+    there, and can be stopped there) and returns the latent, (V, U, Y, X, 1)
+    float32.
     """
     from .priors import divergence4d, gradient4d
 
@@ -694,10 +701,9 @@ def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0
         def apply_A(z, beta=beta):
             return op.adjoint(op.forward(z)) - beta * div(grad(z))
 
-        x = _cg(apply_A, rhs, x, p.n_cg)
+        x = yield from _cg(apply_A, rhs, x, p.n_cg)
         if beta >= p.hqs_beta_max:
             break
-        yield x
         beta = min(beta * p.hqs_kappa, p.hqs_beta_max)
     return x
 
@@ -823,6 +829,8 @@ class _GramLoss:
 
 #: Adam steps of the path fit between two progress reports
 FIT_REPORT_EVERY = 10
+#: least time (s) between two light-field previews of the path stage (its records come often)
+PREVIEW_MIN_INTERVAL = 1.0
 
 
 def _fit_path(pp: _PathParam, loss_fn, steps: int, lr: float, every: int = FIT_REPORT_EVERY):
@@ -862,13 +870,14 @@ def _positions(cp: np.ndarray, n_times: int) -> np.ndarray:
 def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info, make_preview=None):
     """Coarse-to-fine salient-edge / path alternation on the grayscale ``g`` (V, U, Y, X, 1).
 
-    Yields a record after every splitting step of the latent, every
+    Yields a record after every conjugate-gradient iteration of the latent, every
     :data:`FIT_REPORT_EVERY` steps of the path fit and at the end of every
     alternation. ``iteration`` counts these reports within a level, out of
     ``n_iterations = n_outer * per_alternation`` (an alternation that ends
     early jumps to its end), so that the fraction done only grows.
     ``make_preview(latent, factor)``, when given, makes the preview sent with
-    every ``preview_every``-th record.
+    every ``preview_every``-th record (at most one per
+    :data:`PREVIEW_MIN_INTERVAL` seconds).
     """
     V, U, Y, X, _ = g.shape
     # pyramid: factors 2^k with the smallest side >= min_size
@@ -893,15 +902,18 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
     lam0 = p.l0_weight
     # reports per alternation: latent steps (at most those at the smallest lambda), fit reports, the end
     lam_min = min(p.l0_weight, p.l0_weight * p.l0_floor)
-    per_outer = (_n_hqs_steps(lam_min, p) - 1) + (p.path_steps - 1) // FIT_REPORT_EVERY + 1
+    per_outer = _n_hqs_steps(lam_min, p) * (p.n_cg + 1) + (p.path_steps - 1) // FIT_REPORT_EVERY + 1
     n_records = 0
+    last_preview = -math.inf
 
     def record(stage, fac, it, cur, latent, loss=float("nan"), **extra):
-        nonlocal n_records
+        nonlocal n_records, last_preview
         n_records += 1
         preview = None
-        if make_preview is not None and p.preview_every and n_records % p.preview_every == 0:
+        if make_preview is not None and p.preview_every and n_records % p.preview_every == 0 \
+                and time.perf_counter() - last_preview >= PREVIEW_MIN_INTERVAL:
             preview = make_preview(latent, fac)
+            last_preview = time.perf_counter()
         return Progress(
             stage=f"path (level {stage + 1}/{n_stages}, {Y // fac}x{X // fac})",
             iteration=it, n_iterations=p.n_outer * per_outer, loss=loss, control_points=np.array(cur),
@@ -1024,8 +1036,8 @@ def iter_blind_deblur(
 
     Takes the arguments of :func:`blind_deblur`. Arguments are checked when
     the generator is created; closing it stops the work at the next yield:
-    records come after every splitting step of the latent (a few blur
-    operator applications), every :data:`FIT_REPORT_EVERY` Adam steps of the
+    records come after every conjugate-gradient iteration of the latent
+    (one forward and one adjoint blur), every :data:`FIT_REPORT_EVERY` Adam steps of the
     path fit, every alternation and every TV iteration.
 
     Yields
@@ -1033,7 +1045,8 @@ def iter_blind_deblur(
     Progress
         ``stage`` names the stage (``'path (level i/n, YxX)'``, ``'final'``),
         ``control_points`` the current path (in every record), ``preview``
-        on every ``params.preview_every``-th record the current light-field
+        on every ``params.preview_every``-th record (in the path stage, at
+        most one per :data:`PREVIEW_MIN_INTERVAL` s) the current light-field
         estimate (input shape, float32; in the path stage the grayscale
         salient-edge latent, upsampled and repeated over the channels).
         In the path stage ``iteration`` counts the records of the level out
