@@ -391,9 +391,9 @@ def targets(means: list[dict], quick: bool, rows: list[dict] | None = None) -> l
             f"≤ 60 s per light field (slowest {d['seconds_max']:.1f} s, mean {d['seconds']:.1f} s)",
         )
     if d.get("gain") is not None:
-        check(d["gain"] >= 4.0, f"mean PSNR gain ≥ +4 dB (mean {d['gain']:+.2f} dB)")
+        check(d["gain"] >= 4.0, f"mean PSNR gain ≥ +4 dB (mean {d['gain']:+.3f} dB)")
     if d.get("blur_mismatch") is not None:
-        check(d["blur_mismatch"] <= 0.2, f"mean blur mismatch ≤ 0.2 (mean {d['blur_mismatch']:.3f})")
+        check(d["blur_mismatch"] <= 0.2, f"mean blur mismatch ≤ 0.2 (mean {d['blur_mismatch']:.4f})")
     for key, label, better, spec in (
         ("psnr", "PSNR above", np.greater, ".2f"),
         ("angular", "angular error below", np.less, ".5f"),
@@ -467,7 +467,7 @@ def render(rows, means, methods, skipped, args, env) -> str:
         lines += ["**Quick smoke run at tiny sizes: not the benchmark.**", ""]
     lines += [
         f"Run on {env['machine']}, device `{env['device']}`, torch {env['torch']}, "
-        f"{env['threads']} torch threads, {env['date']}. Command: `{env['command']}`. "
+        f"{env['threads']} torch threads, {env['date']}. Command: `` {env['command']} ``. "
         f"1-minute load average {env['load_start']} at the start and {env.get('load_end', 'n/a')} at the end "
         "(other work on the machine slows the timings).",
         "",
