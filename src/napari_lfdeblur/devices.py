@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import torch
 
+from ._memory import host_available_memory
+
 __all__ = ["select_device", "free_memory"]
 
 _CHOICES = ("auto", "cpu", "cuda")
@@ -51,18 +53,11 @@ def select_device(device: str | torch.device | None = "auto") -> torch.device:
 def free_memory(device: str | torch.device | None = "auto") -> int | None:
     """Bytes of memory free on ``device``, or None when unknown.
 
-    CUDA: ``torch.cuda.mem_get_info``; CPU: ``MemAvailable`` of
-    ``/proc/meminfo`` where there is one.
+    CUDA: ``torch.cuda.mem_get_info``; CPU: the host's available memory
+    (``psutil`` or ``/proc/meminfo``).
     """
     dev = select_device(device)
     if dev.type == "cuda":  # pragma: no cover - needs a GPU
         free, _ = torch.cuda.mem_get_info(dev)
         return int(free)
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
+    return host_available_memory()

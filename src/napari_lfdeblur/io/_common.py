@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._memory import host_available_memory
+
 __all__ = [
     "LightFieldError",
     "LightFieldFormatError",
@@ -65,20 +67,8 @@ def available_memory() -> int:
             return int(float(env))
         except ValueError:
             raise ValueError(f"{MEMORY_LIMIT_ENV}={env!r} is not a number of bytes") from None
-    try:
-        import psutil
-
-        return int(psutil.virtual_memory().available)
-    except Exception:  # noqa: BLE001 - psutil missing or failing
-        pass
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 1 << 62
+    available = host_available_memory()
+    return (1 << 62) if available is None else available
 
 
 def _fmt_bytes(n: float) -> str:
