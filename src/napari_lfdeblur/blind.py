@@ -135,8 +135,17 @@ class BlindParams:
         Pixels (chosen at random, favouring strong gradients, with all their
         views) on which the path is fitted to the latent.
     n_random : int
-        Random cubic paths (within ``+-init_length`` views) tried at the start
-        besides the lines, all fitted at once as a batch.
+        Random paths (control points uniform within ``+-init_length`` views)
+        tried at the start besides the lines, all fitted at once as a batch.
+        The fit has many local minima; it is cheap (a few small products per
+        step), so a wide batch is what finds the global one.
+    n_random_later : int
+        Fresh random paths added to the batch at every later alternation.
+    fit_robust : float
+        From the second alternation on, each fitted pixel is weighted by
+        ``1 / (1 + r / (fit_robust * median(r)))``, ``r`` its residual under
+        the current path: pixels whose texture the salient-edge latent lacks
+        count less (0: no weighting).
     n_perturb : int
         Randomly perturbed copies of the current path tried at every later
         alternation (kept only when they fit better).
@@ -182,7 +191,7 @@ class BlindParams:
 
     method: str = "alternating"
     n_control_points: int = 4
-    n_times: int = 8
+    n_times: int = 32
     max_extent: float = 0.0
     # alternating
     n_levels: int = 1
@@ -190,7 +199,7 @@ class BlindParams:
     max_size: int = 0
     n_outer: int = 6
     n_restarts: int = 4
-    init_length: float = 1.0
+    init_length: float = 1.5
     l0_weight: float = 4e-3
     l0_decay: float = 0.5
     l0_floor: float = 0.05
@@ -201,8 +210,10 @@ class BlindParams:
     path_lr: float = 0.05
     path_steps: int = 300
     path_tol: float = 0.01
-    n_pixels: int = 3000
-    n_random: int = 12
+    n_pixels: int = 8000
+    n_random: int = 500
+    n_random_later: int = 200
+    fit_robust: float = 0.3
     n_perturb: int = 4
     perturb: float = 0.3
     tiles: int = 4
@@ -230,7 +241,7 @@ class BlindParams:
             raise ValueError(f"unknown blind method {self.method!r}: choose one of {', '.join(METHODS)}")
         ints = {
             "n_control_points": 2, "n_times": 2, "n_levels": 1, "min_size": 4, "n_outer": 1,
-            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "n_random": 0, "n_perturb": 0, "z_levels": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
+            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "n_random": 0, "n_random_later": 0, "n_perturb": 0, "z_levels": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
             "final_n_times": 2, "preview_every": 0,
         }
         for name, lo in ints.items():
@@ -240,7 +251,7 @@ class BlindParams:
             if v < lo:
                 raise ValueError(f"BlindParams.{name} must be >= {lo}; got {v}")
             object.__setattr__(self, name, int(v))
-        nonneg = ("max_extent", "z_box", "latent_angular_weight", "perturb", "init_length", "l0_weight", "l0_floor", "path_tol", "prior_weight",
+        nonneg = ("max_extent", "z_box", "latent_angular_weight", "perturb", "init_length", "fit_robust", "l0_weight", "l0_floor", "path_tol", "prior_weight",
                   "prior_floor", "tv_weight", "eps_min")
         positive = ("hqs_beta_max", "path_lr", "lf_lr", "eps", "l0_decay", "prior_decay", "eps_decay")
         for name in nonneg + positive:
@@ -505,6 +516,11 @@ class _PathParam:
         self.q[..., :2].clamp_(-self.box, self.box)
         self.q[..., 2].clamp_(-self.z_box, self.z_box)
         self.q.sub_((self.mean_row @ self.q).unsqueeze(-2))
+        # re-centring can push a point out again by a little: shrink such paths about their
+        # (zero) mean, which keeps the gauge
+        for sl, lim in ((slice(0, 2), self.box), (slice(2, 3), self.z_box)):
+            big = self.q[..., sl].abs().amax(dim=(-1, -2), keepdim=True)
+            self.q[..., sl].mul_((lim / big.clamp_min(1e-12)).clamp(max=1.0))
 
     def numpy(self) -> np.ndarray:
         return self.control_points().detach().cpu().double().numpy()
@@ -779,26 +795,43 @@ class _GramLoss:
         self.scale = 1.0 / max(1, self.F.numel())
 
     @torch.no_grad()
-    def set_latent(self, latent):
+    def set_latent(self, latent, cp=None, robust: float = 0.0):
         gy, gx = _grad_yx(latent)
         Lg = torch.stack([gy[:, :, self.ys, self.xs, 0], gx[:, :, self.ys, self.xs, 0]], dim=0)  # (2, V, U, M)
         nO, M = self.nO, self.ys.shape[0]
         G = torch.zeros(self.n_tiles, nO * nO, nO * nO, dtype=latent.dtype, device=latent.device)
         b = torch.zeros(self.n_tiles, nO * nO, dtype=latent.dtype, device=latent.device)
-        for m0 in range(0, M, self.chunk):
-            m1 = min(M, m0 + self.chunk)
-            part = Lg[..., m0:m1]  # (2, V, U, m)
-            # Z[ov, ou, m, (2, V, U)]: the samples at (clamp(v + ov), clamp(u + ou))
-            Zv = part[:, self.vidx]  # (2, nO, V, U, m)
-            Z = Zv[:, :, :, self.uidx]  # (2, nO_v, V, nO_u, U, m)
-            Z = Z.permute(1, 3, 5, 0, 2, 4).reshape(nO * nO, m1 - m0, -1)  # (O, m, 2VU)
-            Fm = self.F[m0:m1]  # (m, 2VU) in (2, V, U) order
+        K = None
+        if cp is not None and robust > 0:
+            K = self.kernels(torch.as_tensor(np.asarray(cp), dtype=latent.dtype, device=latent.device))
+
+        def chunks():
+            for m0 in range(0, M, self.chunk):
+                m1 = min(M, m0 + self.chunk)
+                part = Lg[..., m0:m1]  # (2, V, U, m)
+                # Z[ov, ou, m, (2, V, U)]: the samples at (clamp(v + ov), clamp(u + ou))
+                Zv = part[:, self.vidx]  # (2, nO, V, U, m)
+                Z = Zv[:, :, :, self.uidx]  # (2, nO_v, V, nO_u, U, m)
+                yield m0, m1, Z.permute(1, 3, 5, 0, 2, 4).reshape(nO * nO, m1 - m0, -1)  # (O, m, 2VU)
+
+        w = torch.ones(M, dtype=latent.dtype, device=latent.device)
+        if K is not None:
+            res = torch.empty(M, dtype=latent.dtype, device=latent.device)
+            for m0, m1, Z in chunks():
+                pred = torch.einsum("omj,mo->mj", Z, K[self.pix_tile[m0:m1]])
+                res[m0:m1] = ((pred - self.F[m0:m1]) ** 2).sum(dim=1)
+            scale = robust * res.median().clamp_min(1e-20)
+            w = 1.0 / (1.0 + res / scale)
+        for m0, m1, Z in chunks():
+            sw = w[m0:m1].sqrt()
+            Zw = Z * sw[None, :, None]
+            Fw = self.F[m0:m1] * sw[:, None]  # (m, 2VU) in (2, V, U) order
             tiles = self.pix_tile[m0:m1]
             for t in torch.unique(tiles).tolist():
                 sel = (tiles == t).nonzero().squeeze(1)
-                Zt = Z[:, sel].reshape(nO * nO, -1)
+                Zt = Zw[:, sel].reshape(nO * nO, -1)
                 G[t] += Zt @ Zt.T
-                b[t] += Zt @ Fm[sel].reshape(-1)
+                b[t] += Zt @ Fw[sel].reshape(-1)
         self.G, self.b = G, b
 
     def kernels(self, cp):
@@ -829,6 +862,9 @@ class _GramLoss:
 
 #: Adam steps of the path fit between two progress reports
 FIT_REPORT_EVERY = 10
+#: the path fit stops when its best fit improved by less than this (relative) in FIT_PATIENCE steps
+FIT_RTOL = 1e-6
+FIT_PATIENCE = 30
 #: least time (s) between two light-field previews of the path stage (its records come often)
 PREVIEW_MIN_INTERVAL = 1.0
 
@@ -845,19 +881,20 @@ def _fit_path(pp: _PathParam, loss_fn, steps: int, lr: float, every: int = FIT_R
     for step in range(1, steps + 1):
         opt.zero_grad(set_to_none=True)
         each = loss_fn(pp.control_points())
-        lt = each.sum()
-        lt.backward()
+        each.sum().backward()
         opt.step()
         pp.project()
-        loss = float(lt.detach())
+        # stop when the best path of the batch has not improved for a while (the batch's sum
+        # is no guide: paths pressed against the box keep it oscillating)
+        k = int(torch.argmin(each.detach()))
+        loss = float(each[k].detach())
         if step % every == 0 and step < steps:
-            k = int(torch.argmin(each.detach()))
-            yield step, float(each[k].detach()), pp.numpy().reshape(-1, *pp.q.shape[-2:])[k]
-        if loss < best - 1e-6 * abs(best):
+            yield step, loss, pp.numpy().reshape(-1, *pp.q.shape[-2:])[k]
+        if loss < best - FIT_RTOL * abs(best):
             best, stall = loss, 0
         else:
             stall += 1
-            if stall >= 10:
+            if stall >= FIT_PATIENCE:
                 break
     with torch.no_grad():
         return loss_fn(pp.control_points())
@@ -947,11 +984,11 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
                 tick = min(tick + 1, per_outer - 1)
                 yield record(stage, fac, base + tick, cur, x, alternation=outer, phase="latent", **{"lambda": lam})
             del gen, x, op
-            sub.set_latent(latent)
+            sub.set_latent(latent, cur if (cp is not None or outer > 1) else None, p.fit_robust)
             if cp is None and outer == 1:
                 candidates = [elevate_degree(c, n_lvl) for c in starts]
                 for _ in range(p.n_random):
-                    c = rng.uniform(-0.5, 0.5, size=(n_lvl, 3)) * p.init_length * 2
+                    c = rng.uniform(-1.0, 1.0, size=(n_lvl, 3)) * p.init_length
                     c[:, 2] = 0.0
                     candidates.append(c)
             else:
@@ -959,6 +996,11 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
                 for _ in range(p.n_perturb):
                     c = cur + rng.normal(0.0, p.perturb, size=cur.shape)
                     c[:, 2] = cur[:, 2]
+                    candidates.append(c)
+                # fresh random starts too: the latent has changed, and with it the fit's minima
+                for _ in range(p.n_random_later):
+                    c = rng.uniform(-1.0, 1.0, size=(n_lvl, 3)) * p.init_length
+                    c[:, 2] = 0.0
                     candidates.append(c)
             pp = _PathParam(np.stack(candidates), T, box, device, free_z=free_z, z_box=box * p.z_box)
             pp.project()
