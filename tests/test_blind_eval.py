@@ -75,7 +75,11 @@ def test_targets_are_checked_not_assumed(blind_eval):
         {"case": "a", "method": "baseline2d", "psnr": 31.0, "angular": 0.02},
         {"case": "c", "method": "baseline2d", "psnr": 10.0, "angular": 0.00},  # not paired
     ]
-    means = [{"method": "default", "seconds": 50.0, "seconds_max": 70.0, "gain": 4.5, "blur_mismatch": 0.15}]
+    means = [
+        {"method": "default", "group": "all", "seconds": 50.0, "seconds_max": 70.0, "gain": 4.5, "blur_mismatch": 0.15},
+        # a subgroup's means never stand in for the means over all cases
+        {"method": "default", "group": "held-out", "seconds": 5.0, "seconds_max": 5.0, "gain": 1.0, "blur_mismatch": 0.9},
+    ]
     lines = blind_eval.targets(means, quick=False, rows=rows)
     met = [line for line in lines if line.startswith("- met")]
     unmet = [line for line in lines if line.startswith("- **not met**")]
@@ -94,6 +98,20 @@ def test_summary_skips_failures_and_nan(blind_eval):
     (mean,) = blind_eval.summarise(rows, ["baseline2d"])
     assert mean["psnr"] == pytest.approx(31.0) and mean["gain"] == pytest.approx(1.0)
     assert mean["case"] == "**mean of 2**"
+
+
+def test_summary_gives_held_out_means_apart(blind_eval):
+    held = blind_eval.HELD_OUT_CASES[0]
+    rows = [
+        {"case": "syn-p1", "method": "default", "gain": 6.0},
+        {"case": "syn-p2", "method": "default", "gain": 4.0},
+        {"case": held, "method": "default", "gain": 2.0},
+    ]
+    means = {m["group"]: m for m in blind_eval.summarise(rows, ["default"])}
+    assert means["all"]["gain"] == pytest.approx(4.0) and means["all"]["case"] == "**mean of 3**"
+    assert means["dev"]["gain"] == pytest.approx(5.0)
+    assert means["held-out"]["gain"] == pytest.approx(2.0) and means["held-out"]["case"] == "**mean of 1 held-out**"
+    assert not set(blind_eval.DEV_CASES) & set(blind_eval.HELD_OUT_CASES)
 
 
 def test_peak_memory_sees_an_allocation(blind_eval):

@@ -233,7 +233,7 @@ class BlindParams:
     # final non-blind stage
     tv_weight: float = 0.002
     tv_iter: int = 100
-    final_n_times: int = 16
+    final_n_times: int = 32
     preview_every: int = 10
 
     def __post_init__(self):
