@@ -317,6 +317,12 @@ def test_bad_input_gives_clear_errors():
         BlindParams(method="magic")
     with pytest.raises(ValueError, match="n_control_points"):
         blind_deblur(good, n_control_points=1)
+    with pytest.raises(ValueError, match="n_random_later"):
+        BlindParams(n_random_later=-1)
+    with pytest.raises(ValueError, match="fit_robust"):
+        BlindParams(fit_robust=-0.1)
+    with pytest.raises(ValueError, match="edge_sigma"):
+        BlindParams(edge_sigma=float("nan"))
 
 
 # ------------------------------------------------------------ pieces
@@ -353,6 +359,78 @@ def test_gram_loss_equals_direct_fit_up_to_a_constant():
     gram = [float(gl(torch.tensor(c))) / gl.scale for c in cps]
     ref = [direct(c) for c in cps]
     np.testing.assert_allclose(np.diff(gram), np.diff(ref), rtol=1e-8, atol=1e-8)
+
+
+def test_gram_loss_with_robust_weights_equals_the_weighted_direct_fit():
+    torch.manual_seed(2)
+    f = torch.rand(5, 5, 16, 18, 1, dtype=torch.float64)
+    lat = torch.rand(5, 5, 16, 18, 1, dtype=torch.float64)
+    ref_cp = linear_path(1.0, 40.0)
+    gl = blind._GramLoss(f, 10**6, np.random.default_rng(0), 6, 1.4, 0.0, 1)
+    gl.set_latent(lat, ref_cp, robust=0.5)
+
+    def residuals(cp):
+        b = BlurOperator(f.shape, cp, n_times=6, device="cpu", dtype=torch.float64).forward(lat)
+        (by, bx), (fy, fx) = blind._grad_yx(b), blind._grad_yx(f)
+        r = (by - fy)[:, :, gl.ys, gl.xs] ** 2 + (bx - fx)[:, :, gl.ys, gl.xs] ** 2
+        return r.sum(dim=(0, 1, 3))  # per fitted pixel
+
+    r0 = residuals(ref_cp)
+    w = 1.0 / (1.0 + r0 / (0.5 * r0.median()))  # the documented weights, computed independently
+    cps = [np.array([[-0.6, 0.2, 0], [0.7, -0.4, 0], [0.1, 0.9, 0]]), linear_path(1.3, 20.0), ref_cp]
+    gram = [float(gl(torch.tensor(c))) / gl.scale for c in cps]
+    ref = [float((w * residuals(c)).sum()) for c in cps]
+    np.testing.assert_allclose(np.diff(gram), np.diff(ref), rtol=1e-8, atol=1e-8)
+
+
+def test_edge_blurred_operator_is_adjoint_and_commutes():
+    torch.manual_seed(3)
+    shape = (4, 5, 12, 14, 1)
+    op = BlurOperator(shape, linear_path(1.2, 30.0), n_times=5, device="cpu", dtype=torch.float64)
+    A = blind._EdgeBlurred(op, 0.6)
+    x, y = torch.rand(shape, dtype=torch.float64), torch.rand(shape, dtype=torch.float64)
+    assert float((A.forward(x) * y).sum()) == pytest.approx(float((x * A.adjoint(y)).sum()), rel=1e-10)
+    # an in-plane blur acts over views, the Gaussian within views: away from the borders they commute
+    a = A.forward(x)
+    b = blind._gauss_yx(op.forward(x), 0.6)
+    np.testing.assert_allclose(a[:, :, 3:-3, 3:-3], b[:, :, 3:-3, 3:-3], atol=1e-12)
+    # the Gaussian keeps constants away from the border
+    one = blind._gauss_yx(torch.ones(shape, dtype=torch.float64), 0.6)
+    np.testing.assert_allclose(one[:, :, 3:-3, 3:-3], 1.0, atol=1e-12)
+
+
+def test_path_fit_finds_the_true_curved_path_from_the_sharp_latent():
+    # with the true sharp light field as the latent, the batch of random starts must find the
+    # global minimum of the fit: the true path
+    from napari_lfdeblur.metrics import path_error
+
+    sharp = _scene((7, 7, 40, 40), seed=4)
+    true = np.array([[-0.9, 0.3, 0.0], [0.6, 1.1, 0.0], [0.8, -0.9, 0.0], [-0.4, -0.2, 0.0]])
+    true = blind.center_path(true, 64)
+    blurred = simulate_blur(sharp, true, n_times=64)
+    p = BlindParams()
+    f = torch.as_tensor(blurred)[..., None]
+    lat = torch.as_tensor(sharp)[..., None]
+    rng = np.random.default_rng(0)
+    box = 0.35 * 6
+    gl = blind._GramLoss(f, p.n_pixels, rng, p.n_times, box, 0.0, 1)
+    gl.set_latent(lat)
+    starts = rng.uniform(-1.0, 1.0, size=(p.n_random, 4, 3)) * p.init_length
+    starts[..., 2] = 0.0
+    pp = blind._PathParam(starts, p.n_times, box, "cpu", free_z=False)
+    pp.project()
+    gen = blind._fit_path(pp, gl, p.path_steps, p.path_lr)
+    n_reports = 0
+    while True:
+        try:
+            next(gen)
+            n_reports += 1
+        except StopIteration as stop:
+            scores = stop.value.numpy()
+            break
+    assert n_reports >= 3  # the fit runs on while its best path improves (it used to stop after ~10 steps)
+    best = pp.numpy()[int(np.argmin(scores))]
+    assert path_error(best, true, lightfield=sharp).blur_mismatch < 0.1
 
 
 def test_elevate_degree_keeps_the_curve():

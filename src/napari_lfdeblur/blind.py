@@ -214,6 +214,7 @@ class BlindParams:
     n_random: int = 500
     n_random_later: int = 200
     fit_robust: float = 0.3
+    edge_sigma: float = 0.0
     n_perturb: int = 4
     perturb: float = 0.3
     tiles: int = 4
@@ -251,7 +252,7 @@ class BlindParams:
             if v < lo:
                 raise ValueError(f"BlindParams.{name} must be >= {lo}; got {v}")
             object.__setattr__(self, name, int(v))
-        nonneg = ("max_extent", "z_box", "latent_angular_weight", "perturb", "init_length", "fit_robust", "l0_weight", "l0_floor", "path_tol", "prior_weight",
+        nonneg = ("max_extent", "z_box", "latent_angular_weight", "perturb", "init_length", "fit_robust", "edge_sigma", "l0_weight", "l0_floor", "path_tol", "prior_weight",
                   "prior_floor", "tv_weight", "eps_min")
         positive = ("hqs_beta_max", "path_lr", "lf_lr", "eps", "l0_decay", "prior_decay", "eps_decay")
         for name in nonneg + positive:
@@ -724,6 +725,35 @@ def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0
     return x
 
 
+def _gauss_yx(L: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Spatial Gaussian blur of (V, U, Y, X, C), zero padded (so the operator is self-adjoint)."""
+    if sigma <= 0:
+        return L
+    r = max(1, int(math.ceil(3 * sigma)))
+    t = torch.arange(-r, r + 1, dtype=L.dtype, device=L.device)
+    k = torch.exp(-0.5 * (t / sigma) ** 2)
+    k = k / k.sum()
+    V, U, Y, X, C = L.shape
+    z = L.permute(0, 1, 4, 2, 3).reshape(V * U * C, 1, Y, X)
+    z = torch.nn.functional.conv2d(z, k.view(1, 1, -1, 1), padding=(r, 0))
+    z = torch.nn.functional.conv2d(z, k.view(1, 1, 1, -1), padding=(0, r))
+    return z.reshape(V, U, C, Y, X).permute(0, 1, 3, 4, 2)
+
+
+class _EdgeBlurred:
+    """``K_p G_sigma``: the blur of a latent whose edges are sharper than the scene's by a
+    spatial Gaussian of ``sigma`` px (which commutes with the angular blur of an in-plane path)."""
+
+    def __init__(self, op, sigma):
+        self.op, self.sigma = op, sigma
+
+    def forward(self, z):
+        return self.op.forward(_gauss_yx(z, self.sigma))
+
+    def adjoint(self, r):
+        return _gauss_yx(self.op.adjoint(r), self.sigma)
+
+
 class _GramLoss:
     """The gradient-domain path fit ``sum ||grad_yx(K_p l) - grad_yx f||^2`` as a quadratic form.
 
@@ -795,8 +825,8 @@ class _GramLoss:
         self.scale = 1.0 / max(1, self.F.numel())
 
     @torch.no_grad()
-    def set_latent(self, latent, cp=None, robust: float = 0.0):
-        gy, gx = _grad_yx(latent)
+    def set_latent(self, latent, cp=None, robust: float = 0.0, sigma: float = 0.0):
+        gy, gx = _grad_yx(_gauss_yx(latent, sigma))
         Lg = torch.stack([gy[:, :, self.ys, self.xs, 0], gx[:, :, self.ys, self.xs, 0]], dim=0)  # (2, V, U, M)
         nO, M = self.nO, self.ys.shape[0]
         G = torch.zeros(self.n_tiles, nO * nO, nO * nO, dtype=latent.dtype, device=latent.device)
@@ -974,6 +1004,8 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
             base = (outer - 1) * per_outer
             tick = 0
             op = BlurOperator(shape, cur, n_times=T, infinity_disparity=d_lvl, device=device)
+            if p.edge_sigma > 0:
+                op = _EdgeBlurred(op, p.edge_sigma)
             gen, x = _l0_latent(op, f, lam, p, latent), None
             while True:
                 try:
@@ -984,7 +1016,7 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
                 tick = min(tick + 1, per_outer - 1)
                 yield record(stage, fac, base + tick, cur, x, alternation=outer, phase="latent", **{"lambda": lam})
             del gen, x, op
-            sub.set_latent(latent, cur if (cp is not None or outer > 1) else None, p.fit_robust)
+            sub.set_latent(latent, cur if (cp is not None or outer > 1) else None, p.fit_robust, p.edge_sigma)
             if cp is None and outer == 1:
                 candidates = [elevate_degree(c, n_lvl) for c in starts]
                 for _ in range(p.n_random):
