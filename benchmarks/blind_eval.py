@@ -452,6 +452,11 @@ METHOD_TEXT = """\
   between two positions is 2 views for `p1`, 3 for `p2` and 2.5 for `p3`, which also moves in z),
   rendered with **T = 128** instants — far more than a
   solver uses — with `d_inf = 0`, plus Gaussian noise σ = 0.002 (seeded), clipped to [0, 1].
+- **Held-out cases**, never used to choose the solver's settings: `syn2`, the synthetic scene with
+  `seed=2`, and `lytro2`, the top-left 128×128 pixels of the same Lytro capture (the `lytro` crop is
+  pixels 64..191, so a quarter of `lytro2` overlaps it), views 2..10, each blurred by `p4`
+  (`random_path(4, seed=104)`, 2.5 views, in-plane) and `p5` (`seed=105`, 2 views, with z). The
+  summary gives the means over all cases and over each group.
 - **Ground truth.** The true path is moved to the zero-mean gauge for T = 128, so the ground-truth
   light field is the sharp one seen from the mean camera position (MODEL.md, "Gauge of results").
 - **Image metrics** (`napari_lfdeblur.metrics`), with {crop} border pixels cropped in y and x:

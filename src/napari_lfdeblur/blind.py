@@ -24,11 +24,14 @@ Two algorithms, chosen by :attr:`BlindParams.method`:
        current path, and
        (b) the path fitted to that latent in the gradient domain,
        ``min_p ||grad_yx(K_p l_s) - grad_yx f||^2``, by Adam;
-    3. the path starts from a few short linear paths in different
-       directions (never from the zero path, where its gradient vanishes in
-       the zero-mean gauge), scored on the coarsest level; its degree is
-       raised (exactly, by Bezier degree elevation) from a line to the
-       requested number of control points on the way up;
+    3. the fit has many local minima, so every alternation fits a wide batch
+       of paths at once (cheap: the fit is a small quadratic form in the
+       blur kernel) and keeps the best: at first short lines in spread
+       directions and hundreds of random paths (never the zero path, where
+       the gradient vanishes in the zero-mean gauge), later the current path,
+       its mirror, perturbed copies and fresh random paths; with a pyramid,
+       the degree is raised (exactly, by Bezier degree elevation) from a line
+       to the requested number of control points on the way up;
     4. the zero-mean gauge holds throughout (the control points are
        re-centred inside every step) and the path is kept in a box of the
        aperture (FINDINGS.md, section 3);
@@ -151,6 +154,12 @@ class BlindParams:
         alternation (kept only when they fit better).
     perturb : float
         Standard deviation of those perturbations, in views.
+    edge_sigma : float
+        The salient-edge latent is taken to be sharper than the scene by a
+        spatial Gaussian of this many pixels, applied inside the model, so
+        that the path need not absorb the edge profile (0: off). Helps on
+        rendered light fields with crisp edges; hurts on small-disparity
+        captures (docs/blind.md).
     tiles : int
         With ``p_z`` estimated, the fit takes the blur kernel constant over
         ``tiles x tiles`` tiles of the image.
