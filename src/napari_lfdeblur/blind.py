@@ -170,9 +170,11 @@ class BlindParams:
         minimum of the fit for curved paths), keeping the better.
     estimate_z : bool
         Estimate ``p_z`` (out-of-plane motion); False keeps the path in-plane.
-    z_levels : int
-        ``p_z`` is estimated on this many of the finest levels only (the
-        coarse levels fit the in-plane motion, which dominates).
+    z_outer : int
+        With ``estimate_z``, alternations of a last stage, on the finest
+        level, in which ``p_z`` is free; it starts from the in-plane estimate
+        (which dominates the blur) and tries it with random out-of-plane
+        motions.
     path_tol : float
         A level stops when the path moves less than this (views, largest
         change of a sampled position) in two successive alternations.
@@ -230,7 +232,7 @@ class BlindParams:
     z_box: float = 0.5
     try_mirror: bool = True
     estimate_z: bool = False
-    z_levels: int = 1
+    z_outer: int = 3
     # joint (paper)
     n_iter: int = 1000
     lf_lr: float = 0.04
@@ -251,7 +253,7 @@ class BlindParams:
             raise ValueError(f"unknown blind method {self.method!r}: choose one of {', '.join(METHODS)}")
         ints = {
             "n_control_points": 2, "n_times": 2, "n_levels": 1, "min_size": 4, "n_outer": 1,
-            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "n_random": 0, "n_random_later": 0, "n_perturb": 0, "z_levels": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
+            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "n_random": 0, "n_random_later": 0, "n_perturb": 0, "z_outer": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
             "final_n_times": 2, "preview_every": 0,
         }
         for name, lo in ints.items():
@@ -965,7 +967,13 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
         fac = top * 2**k
         if min(Y, X) // fac >= p.min_size or fac == top:
             factors.append(fac)
-    n_stages = len(factors)
+    # stages: (factor, p_z free, alternations); with estimate_z, a last stage on the finest level
+    # frees p_z, starting from the in-plane estimate
+    stages = [(fac, False, p.n_outer) for fac in factors]
+    if p.estimate_z and p.z_outer > 0:
+        stages.append((factors[-1], True, p.z_outer))
+    n_stages = len(stages)
+    info["n_path_stages"] = n_stages
     T = p.n_times
     # initial paths: short lines in evenly spread directions, jittered by the seed
     n_start = 2 if len(factors) > 1 or n_cp == 2 else n_cp
@@ -983,6 +991,7 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
     last_preview = -math.inf
 
     def record(stage, fac, it, cur, latent, loss=float("nan"), **extra):
+        n_outer = stages[stage][2]
         nonlocal n_records, last_preview
         n_records += 1
         preview = None
@@ -991,25 +1000,26 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
             preview = make_preview(latent, fac)
             last_preview = time.perf_counter()
         return Progress(
-            stage=f"path (level {stage + 1}/{n_stages}, {Y // fac}x{X // fac})",
-            iteration=it, n_iterations=p.n_outer * per_outer, loss=loss, control_points=np.array(cur),
+            stage=f"path ({'p_z' if stages[stage][1] else 'level'} {stage + 1}/{n_stages}, {Y // fac}x{X // fac})",
+            iteration=it, n_iterations=n_outer * per_outer, loss=loss, control_points=np.array(cur),
             preview=preview, stage_index=stage, n_stages=n_stages + 1, info={"level": stage, "factor": fac, **extra},
         )
 
-    for stage, fac in enumerate(factors):
+    latent = None
+    for stage, (fac, free_z, n_outer) in enumerate(stages):
         f = _downsample(g, fac)
         shape = tuple(f.shape)
         d_lvl = d_inf / fac
-        n_lvl = n_cp if stage == len(factors) - 1 else min(n_cp, n_start + stage)
-        free_z = p.estimate_z and stage >= len(factors) - p.z_levels
+        n_lvl = n_cp if stage >= len(factors) - 1 else min(n_cp, n_start + stage)
         sub = _GramLoss(f, p.n_pixels, rng, T, box, box * p.z_box if free_z else 0.0, p.tiles if free_z else 1)
         lam = lam0
-        latent = f.clone()
+        if latent is None or latent.shape != f.shape:
+            latent = f.clone()
         cur = np.zeros((n_lvl, 3)) if cp is None else elevate_degree(cp, n_lvl)
         if not free_z:
             cur[:, 2] = 0.0
         still = 0
-        for outer in range(1, p.n_outer + 1):
+        for outer in range(1, n_outer + 1):
             base = (outer - 1) * per_outer
             tick = 0
             op = BlurOperator(shape, cur, n_times=T, infinity_disparity=d_lvl, device=device)
@@ -1038,6 +1048,11 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
                     c = cur + rng.normal(0.0, p.perturb, size=cur.shape)
                     c[:, 2] = cur[:, 2]
                     candidates.append(c)
+                if free_z:  # the current in-plane shape with random out-of-plane motions
+                    for _ in range(p.n_random_later):
+                        c = cur.copy()
+                        c[:, 2] = rng.uniform(-1.0, 1.0, size=len(cur)) * box * p.z_box
+                        candidates.append(c)
                 # fresh random starts too: the latent has changed, and with it the fit's minima
                 for _ in range(p.n_random_later):
                     c = rng.uniform(-1.0, 1.0, size=(n_lvl, 3)) * p.init_length
@@ -1254,6 +1269,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points):
     else:
         cp, factors = yield from _iter_joint(g, d_inf, p, dev, rng, n_cp, box, history, info, make_preview)
     info["levels"] = [(arr.shape[2] // k, arr.shape[3] // k) for k in factors]
+    n_path = info.pop("n_path_stages", len(factors))
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
     del g, f
@@ -1273,8 +1289,8 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points):
                 out = stop.value
                 break
             yield Progress(stage="final", iteration=rec.iteration, n_iterations=rec.n_iterations,
-                           loss=rec.loss, control_points=cp, preview=rec.preview, stage_index=len(factors),
-                           n_stages=len(factors) + 1, info=rec.info)
+                           loss=rec.loss, control_points=cp, preview=rec.preview, stage_index=n_path,
+                           n_stages=n_path + 1, info=rec.info)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()
     t2 = time.perf_counter()
