@@ -524,3 +524,23 @@ def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
     assert main(["deblur", str(tmp_path / "missing.npz"), str(tmp_path / "o.npz")]) == 2
     assert main(["deblur", str(src), str(tmp_path / "o2.npz"), "--preset", "nope"]) == 2
+
+
+def test_solvers_never_leave_the_caller_without_grad(linear_case):
+    # a widget's worker thread runs the generators; a suspended (or abandoned) generator must not leave
+    # the thread in no_grad mode, and a run must work whatever the caller's mode
+    from napari_lfdeblur.deconvolution import iter_deconvolve
+
+    _, cp, blurred = linear_case
+    small = blurred[:, :, :16, :16]
+    gen = iter_deconvolve(small, cp, method="tv", n_iter=5, device="cpu")
+    next(gen)
+    assert torch.is_grad_enabled()
+    gen = iter_blind_deblur(small, params=BlindParams().replace(n_outer=1, path_steps=20, tv_iter=3), device="cpu")
+    for _ in range(40):
+        next(gen)
+        assert torch.is_grad_enabled()
+    gen.close()
+    with torch.no_grad():
+        res = blind_deblur(small, params=BlindParams().replace(n_outer=1, path_steps=20, tv_iter=2), device="cpu")
+    assert np.isfinite(res.control_points).all()

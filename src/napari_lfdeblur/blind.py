@@ -921,8 +921,9 @@ def _fit_path(pp: _PathParam, loss_fn, steps: int, lr: float, every: int = FIT_R
     stall = 0
     for step in range(1, steps + 1):
         opt.zero_grad(set_to_none=True)
-        each = loss_fn(pp.control_points())
-        each.sum().backward()
+        with torch.enable_grad():  # whatever the caller's mode (a worker thread may have been left in no_grad)
+            each = loss_fn(pp.control_points())
+            each.sum().backward()
         opt.step()
         pp.project()
         # stop when the best path of the batch has not improved for a while (the batch's sum
@@ -1104,10 +1105,11 @@ def _iter_joint(g, d_inf, p: BlindParams, device, rng, n_cp, box, history, info,
         w = max(w0 * p.prior_decay ** (it - 1), w0 * p.prior_floor)
         eps = max(p.eps * p.eps_decay ** (it - 1), p.eps_min)
         opt.zero_grad(set_to_none=True)
-        op = BlurOperator(shape, pp.control_points(), n_times=p.n_times, infinity_disparity=d_inf, device=device)
-        r = op.forward(L) - g
-        loss = (r * r).mean() + w * sparse_gradient_prior(L, eps)
-        loss.backward()
+        with torch.enable_grad():
+            op = BlurOperator(shape, pp.control_points(), n_times=p.n_times, infinity_disparity=d_inf, device=device)
+            r = op.forward(L) - g
+            loss = (r * r).mean() + w * sparse_gradient_prior(L, eps)
+            loss.backward()
         opt.step()
         pp.project()
         history.append(float(loss.detach()))

@@ -264,56 +264,56 @@ def _tv_value(x, isotropic, axis_weights) -> float:
     return float(acc.sqrt_().sum()) if isotropic else total
 
 
+@torch.no_grad()  # entered at each resume and left at each yield: never leaks to the caller
 def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: DeconvolutionParams, weight, ndim):
     """Condat-Vu primal-dual iterations for ``1/2 ||K x - f||^2 + w TV4(x)`` (+ box)."""
     aw = params.axis_weights
     lo, hi = None, None
     if params.clip and float(f.min()) >= 0.0 and float(f.max()) <= 1.0:
         lo, hi = 0.0, 1.0
-    with torch.no_grad():
-        # ||K||^2 <= ||K||_1 ||K||_inf; rows of K are averages of interpolations (sum 1, >= 0)
-        lip = max(1.0, float(op.adjoint(torch.ones_like(f)).max()))
-        knorm2 = gradient_norm_bound(aw)
-        tau = 1.3 / lip  # measured: a little faster than 1 / lip, still within the Condat-Vu condition
-        sigma = 0.99 * (1.0 / tau - lip / 2.0) / max(knorm2, 1e-12)
-        x = x0.clone()
+    # ||K||^2 <= ||K||_1 ||K||_inf; rows of K are averages of interpolations (sum 1, >= 0)
+    lip = max(1.0, float(op.adjoint(torch.ones_like(f)).max()))
+    knorm2 = gradient_norm_bound(aw)
+    tau = 1.3 / lip  # measured: a little faster than 1 / lip, still within the Condat-Vu condition
+    sigma = 0.99 * (1.0 / tau - lip / 2.0) / max(knorm2, 1e-12)
+    x = x0.clone()
+    if lo is not None:
+        x.clamp_(lo, hi)
+    dual = [torch.zeros_like(f) for _ in range(4)] if weight > 0 else None
+    n = params.n_iter
+    for it in range(1, n + 1):
+        resid = op.forward(x) - f
+        loss = 0.5 * float((resid * resid).sum())
+        grad = op.adjoint(resid)
+        del resid
+        if dual is not None:
+            loss += weight * _tv_value(x, params.isotropic, aw)
+            grad.sub_(divergence4d(dual, aw))
+        x_new = x - tau * grad
+        del grad
         if lo is not None:
-            x.clamp_(lo, hi)
-        dual = [torch.zeros_like(f) for _ in range(4)] if weight > 0 else None
-        n = params.n_iter
-        for it in range(1, n + 1):
-            resid = op.forward(x) - f
-            loss = 0.5 * float((resid * resid).sum())
-            grad = op.adjoint(resid)
-            del resid
-            if dual is not None:
-                loss += weight * _tv_value(x, params.isotropic, aw)
-                grad.sub_(divergence4d(dual, aw))
-            x_new = x - tau * grad
-            del grad
-            if lo is not None:
-                x_new.clamp_(lo, hi)
-            change = float(torch.linalg.vector_norm(x_new - x)) / max(float(torch.linalg.vector_norm(x_new)), 1e-12)
-            if dual is not None:
-                # dual ascent at the extrapolated point 2 x_new - x
-                _add_gradient_(dual, x_new, 2.0 * sigma, aw)
-                _add_gradient_(dual, x, -sigma, aw)
-                project_tv_dual(dual, weight, params.isotropic)
-            x = x_new
-            preview = None
-            if params.preview_every and it % params.preview_every == 0:
-                preview = from_tensor(x, ndim)
-            done = change < params.tol and it >= 3
-            yield Progress(
-                stage="tv",
-                iteration=it,
-                n_iterations=n,
-                loss=loss,
-                preview=preview,
-                info={"relative_change": change, "weight": weight, "tau": tau, "sigma": sigma},
-            )
-            if done:
-                break
+            x_new.clamp_(lo, hi)
+        change = float(torch.linalg.vector_norm(x_new - x)) / max(float(torch.linalg.vector_norm(x_new)), 1e-12)
+        if dual is not None:
+            # dual ascent at the extrapolated point 2 x_new - x
+            _add_gradient_(dual, x_new, 2.0 * sigma, aw)
+            _add_gradient_(dual, x, -sigma, aw)
+            project_tv_dual(dual, weight, params.isotropic)
+        x = x_new
+        preview = None
+        if params.preview_every and it % params.preview_every == 0:
+            preview = from_tensor(x, ndim)
+        done = change < params.tol and it >= 3
+        yield Progress(
+            stage="tv",
+            iteration=it,
+            n_iterations=n,
+            loss=loss,
+            preview=preview,
+            info={"relative_change": change, "weight": weight, "tau": tau, "sigma": sigma},
+        )
+        if done:
+            break
     return x
 
 
