@@ -471,6 +471,55 @@ def test_device_falls_back_to_cpu_when_memory_is_short(monkeypatch):
         assert blind.plan_device(torch.device("cuda"), 10**9).type == "cuda"
 
 
+def test_plan_tiles_fits_the_budget():
+    shape = (9, 9, 600, 800, 3)
+    p = BlindParams()
+    assert blind.plan_tiles(shape, p, None) is None
+    assert blind.plan_tiles(shape, p, blind.estimate_blind_memory(shape, p)) is None
+    free = blind.estimate_blind_memory(shape, p) // 3
+    ty, tx = blind.plan_tiles(shape, p, free)
+    assert blind.MIN_TILE <= ty < 600 and blind.MIN_TILE <= tx < 800
+    m = blind.TILE_MARGIN
+    result = 4 * 9 * 9 * 600 * 800 * 3
+    assert blind.estimate_blind_memory((9, 9, ty + 2 * m, tx + 2 * m, 3), p) + result <= free
+    # not much smaller than needed: 1.25 times the side would not fit
+    big = int(ty * 1.25)
+    assert blind.estimate_blind_memory((9, 9, big + 2 * m, big + 2 * m, 3), p) + result > free
+    # the tiles cover the image exactly once, each inside its padded window
+    cover = np.zeros((600, 800), int)
+    for core, pad in blind._tiles(600, 800, (ty, tx), m):
+        cover[core] += 1
+        assert pad[0].start <= core[0].start and pad[0].stop >= core[0].stop
+        assert pad[1].start <= core[1].start and pad[1].stop >= core[1].stop
+    assert (cover == 1).all()
+
+
+def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
+    from napari_lfdeblur.deconvolution import deconvolve
+
+    sharp = _scene((5, 5, 72, 72), seed=6)
+    cp = np.array([[-0.6, 0.2, -0.3], [0.5, -0.3, 0.3]])
+    blurred = simulate_blur(sharp, cp, n_times=32)
+    p = BlindParams().replace(n_control_points=2, n_outer=2, path_steps=60, tv_iter=20, final_n_times=8)
+    full = blind.estimate_blind_memory(blurred.shape, p)
+    monkeypatch.setattr(blind, "_free_memory", lambda device: full // 2)
+    with pytest.warns(RuntimeWarning, match="overlapping tiles"):
+        gen = iter_blind_deblur(blurred, params=p, device="cpu")
+    stages = set()
+    while True:
+        try:
+            stages.add(next(gen).stage)
+        except StopIteration as stop:
+            res = stop.value
+            break
+    assert res.info["tile"][0] < 72 and any(s.startswith("final (tile 2/") for s in stages)
+    assert res.lightfield.shape == blurred.shape and np.isfinite(res.lightfield).all()
+    # the tiles, with their overlap, give nearly what one full-frame solve with that path gives
+    ref = deconvolve(blurred, res.control_points, n_times=8, method="tv", weight=p.tv_weight, n_iter=20, tol=0.0,
+                     device="cpu")
+    assert np.abs(res.lightfield - ref).max() < 2e-3
+
+
 def test_out_of_memory_mid_run_falls_back_and_releases(monkeypatch):
     released = []
     devices_run = []
@@ -480,7 +529,7 @@ def test_out_of_memory_mid_run_falls_back_and_releases(monkeypatch):
 
     gpu_buffers = []
 
-    def fake_run(arr, d_inf, p, dev, seed, n_cp):
+    def fake_run(arr, d_inf, p, dev, seed, n_cp, tile=None):
         devices_run.append(dev.type)
         yield "progress"
         if dev.type == "cuda":

@@ -164,3 +164,19 @@ def test_in_plane_blur_is_one_angular_matrix_per_pixel():
     np.testing.assert_allclose(simulate_blur(lf, cp, n_times=T), want, atol=1e-5)
     # rows sum to one: the blur preserves constants
     np.testing.assert_allclose(M.sum(axis=1), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("d_inf", [0.0, 0.8])
+def test_a_tile_with_its_frame_blurs_like_the_full_light_field(d_inf):
+    rng = np.random.default_rng(5)
+    lf = rng.random((5, 5, 30, 40)).astype(np.float32)
+    cp = np.array([[-0.7, 0.3, -0.8], [0.4, -0.5, 0.2], [0.6, 0.4, 0.9]])  # strong p_z: shifts vary with x, y
+    full = simulate_blur(lf, cp, n_times=12, infinity_disparity=d_inf, device="cpu")
+    y0, x0, h, w = 7, 11, 16, 20
+    op = BlurOperator((5, 5, h, w), cp, n_times=12, infinity_disparity=d_inf, device="cpu", frame=(y0, x0, 30, 40))
+    tile = op.forward(torch.as_tensor(lf[:, :, y0 : y0 + h, x0 : x0 + w])[..., None])[..., 0].numpy()
+    m = 0 if d_inf == 0 else 3  # d_inf shifts pixels across the tile's edge: compare inside a margin
+    np.testing.assert_allclose(tile[:, :, m : h - m, m : w - m], full[:, :, y0 + m : y0 + h - m, x0 + m : x0 + w - m],
+                               atol=1e-5)
+    with pytest.raises(ValueError, match="does not fit"):
+        BlurOperator((5, 5, h, w), cp, device="cpu", frame=(20, 0, 30, 40))

@@ -569,6 +569,59 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     return int(max(final, path) + tables + blocks + 64 * 2**20)
 
 
+#: overlap (px) of neighbouring tiles in the final stage, on top of what ``d_inf`` shifts
+TILE_MARGIN = 12
+#: smallest tile side (px) worth working on
+MIN_TILE = 32
+
+
+def plan_tiles(shape, params: BlindParams | None, free: int | None):
+    """The tile size ``(ty, tx)`` to work in when the whole light field does not fit, else None.
+
+    The largest square-ish tiles (plus :data:`TILE_MARGIN` on each side) whose
+    :func:`estimate_blind_memory` fits in ``free`` bytes, after the full-size
+    result is set aside. None when ``free`` is unknown or enough.
+
+    Parameters
+    ----------
+    shape : tuple, (V, U, Y, X[, C])
+    params : BlindParams, optional
+    free : int or None
+        Bytes available.
+
+    Returns
+    -------
+    tuple of 2 int, or None
+    """
+    p = params or BlindParams()
+    shape = tuple(int(v) for v in shape)
+    if free is None or estimate_blind_memory(shape, p) <= free:
+        return None
+    V, U, Y, X = shape[:4]
+    C = shape[4] if len(shape) == 5 else 1
+    budget = free - 4 * V * U * Y * X * C  # the result, full size
+
+    def need(side):
+        ty, tx = min(Y, side + 2 * TILE_MARGIN), min(X, side + 2 * TILE_MARGIN)
+        return estimate_blind_memory((V, U, ty, tx, C), p)
+
+    side = max(Y, X)
+    while side > MIN_TILE and need(side) > budget:
+        side = max(MIN_TILE, int(side * 0.8))
+    return min(Y, side), min(X, side)
+
+
+def _tiles(Y: int, X: int, tile, margin: int):
+    """``(core, padded)`` slices (y, x) covering a Y x X image with tiles of ``tile`` and ``margin``."""
+    ty, tx = tile
+    for y0 in range(0, Y, ty):
+        for x0 in range(0, X, tx):
+            y1, x1 = min(Y, y0 + ty), min(X, x0 + tx)
+            py0, px0 = max(0, y0 - margin), max(0, x0 - margin)
+            py1, px1 = min(Y, y1 + margin), min(X, x1 + margin)
+            yield (slice(y0, y1), slice(x0, x1)), (slice(py0, py1), slice(px0, px1))
+
+
 def _free_memory(device: torch.device) -> int | None:
     from . import devices
 
@@ -1165,18 +1218,31 @@ def iter_blind_deblur(
     dev = select_device(device)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise ValueError(f"seed must be an integer; got {seed!r}")
-    dev = plan_device(dev, estimate_blind_memory(arr.shape, p))
-    return _run_with_fallback(arr, d_inf, p, dev, int(seed), n_control_points)
+    dev = plan_device(dev, estimate_blind_memory(arr.shape, p), tiles_possible=True)
+    tile = plan_tiles(arr.shape, p, _free_memory(dev))
+    if tile is not None:
+        warnings.warn(
+            f"blind deblurring needs about {estimate_blind_memory(arr.shape, p) / 2**30:.2f} GiB, more than is "
+            f"available: estimating the path on the central {tile[0]}x{tile[1]} pixels and restoring the light "
+            f"field in overlapping tiles of {tile[0]}x{tile[1]}",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    return _run_with_fallback(arr, d_inf, p, dev, int(seed), n_control_points, tile)
 
 
-def plan_device(device: torch.device, need: int) -> torch.device:
+def plan_device(device: torch.device, need: int, tiles_possible: bool = False) -> torch.device:
     """The device to run on, given an estimate of the memory needed (bytes).
 
     A CUDA device without ``need`` bytes free falls back to the CPU with a
-    :class:`RuntimeWarning`; on the CPU a shortage is only warned about.
+    :class:`RuntimeWarning`; on the CPU a shortage is only warned about
+    (unless ``tiles_possible``: the caller then works in tiles, see
+    :func:`plan_tiles`).
     """
     free = _free_memory(device)
     if free is None or need <= free:
+        return device
+    if device.type != "cuda" and tiles_possible:
         return device
     if device.type == "cuda":
         warnings.warn(
@@ -1195,9 +1261,9 @@ def plan_device(device: torch.device, need: int) -> torch.device:
     return device
 
 
-def _run_with_fallback(arr, d_inf, p, dev, seed, n_control_points):
+def _run_with_fallback(arr, d_inf, p, dev, seed, n_control_points, tile=None):
     try:
-        result = yield from _run(arr, d_inf, p, dev, seed, n_control_points)
+        result = yield from _run(arr, d_inf, p, dev, seed, n_control_points, tile)
         return result
     except torch.cuda.OutOfMemoryError as exc:
         if dev.type != "cuda":
@@ -1208,7 +1274,7 @@ def _run_with_fallback(arr, d_inf, p, dev, seed, n_control_points):
     finally:
         _empty_cache(dev)
     warnings.warn(f"the GPU ran out of memory ({message}); starting again on the CPU", RuntimeWarning, stacklevel=2)
-    result = yield from _run(arr, d_inf, p, torch.device("cpu"), seed, n_control_points)
+    result = yield from _run(arr, d_inf, p, torch.device("cpu"), seed, n_control_points, tile)
     return result
 
 
@@ -1246,14 +1312,18 @@ def _preview(latent: torch.Tensor, fac: int, shape, unshear: float) -> np.ndarra
     return np.ascontiguousarray(out, dtype=np.float32)
 
 
-def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points):
+def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points, tile=None):
     t0 = time.perf_counter()
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    V, U = arr.shape[:2]
+    V, U, Y, X = arr.shape[:4]
     n_cp = int(n_control_points) if n_control_points is not None else p.n_control_points
     box = p.max_extent if p.max_extent > 0 else max(0.5, 0.35 * (min(V, U) - 1))
-    f = torch.as_tensor(np.ascontiguousarray(arr), dtype=torch.float32, device=dev)
+    crop = arr
+    if tile is not None:  # the path from the central tile-sized crop (the path is the same everywhere)
+        cy, cx = min(Y, tile[0] + 2 * TILE_MARGIN), min(X, tile[1] + 2 * TILE_MARGIN)
+        crop = arr[:, :, (Y - cy) // 2 : (Y - cy) // 2 + cy, (X - cx) // 2 : (X - cx) // 2 + cx]
+    f = torch.as_tensor(np.ascontiguousarray(crop), dtype=torch.float32, device=dev)
     if arr.ndim == 4:
         f = f.unsqueeze(-1)
     g = _gray(f).contiguous()
@@ -1270,29 +1340,56 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points):
         cp, factors = yield from _iter_alternating(g, 0.0, p, dev, rng, n_cp, box, history, info, make_preview)
     else:
         cp, factors = yield from _iter_joint(g, d_inf, p, dev, rng, n_cp, box, history, info, make_preview)
-    info["levels"] = [(arr.shape[2] // k, arr.shape[3] // k) for k in factors]
+    info["levels"] = [(crop.shape[2] // k, crop.shape[3] // k) for k in factors]
     n_path = info.pop("n_path_stages", len(factors))
+    if crop is not arr:
+        # p_z in the crop's normalised coordinates -> the full frame's (x~ scales by r_crop / r_full)
+        cp = np.array(cp, dtype=np.float64)
+        cp[:, 2] *= max(Y, X) / max(crop.shape[2], crop.shape[3])
+        info["tile"] = tuple(tile)
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
     del g, f
-    # final non-blind stage, all channels at once
+    # final non-blind stage, all channels at once (tile by tile when memory is short)
     if p.tv_iter > 0:
         from .deconvolution import iter_deconvolve
 
-        gen = iter_deconvolve(
-            arr, cp, n_times=p.final_n_times, infinity_disparity=d_inf, device=dev,
-            method="tv", weight=p.tv_weight, n_iter=p.tv_iter, tol=0.0,
-            preview_every=p.preview_every,
-        )
-        while True:
-            try:
-                rec = next(gen)
-            except StopIteration as stop:
-                out = stop.value
-                break
-            yield Progress(stage="final", iteration=rec.iteration, n_iterations=rec.n_iterations,
-                           loss=rec.loss, control_points=cp, preview=rec.preview, stage_index=n_path,
-                           n_stages=n_path + 1, info=rec.info)
+        if tile is None:
+            parts = [((slice(None), slice(None)), (slice(None), slice(None)))]
+        else:
+            reach = float(np.abs(bezier_positions(cp, p.final_n_times)).sum(axis=1).max())  # |p_x| + |p_y| + |p_z|
+            parts = list(_tiles(Y, X, tile, TILE_MARGIN + int(math.ceil(abs(d_inf) * reach))))
+            out = np.array(arr, dtype=np.float32)  # restored tile by tile; the rest shows as blurred meanwhile
+        n_all = p.tv_iter * len(parts)
+        for i, (core, pad) in enumerate(parts):
+            piece = arr[:, :, pad[0], pad[1]]
+            y0, x0 = pad[0].start or 0, pad[1].start or 0
+            frame = None if tile is None else (y0, x0, Y, X)
+            gen = iter_deconvolve(
+                piece, cp, n_times=p.final_n_times, infinity_disparity=d_inf, device=dev,
+                method="tv", weight=p.tv_weight, n_iter=p.tv_iter, tol=0.0,
+                preview_every=p.preview_every, frame=frame,
+            )
+            inner = (slice(core[0].start - y0, core[0].stop - y0), slice(core[1].start - x0, core[1].stop - x0)) \
+                if tile is not None else None
+            while True:
+                try:
+                    rec = next(gen)
+                except StopIteration as stop:
+                    res = stop.value
+                    break
+                preview = rec.preview
+                if tile is not None and preview is not None:
+                    preview = out.copy()
+                    preview[:, :, core[0], core[1]] = rec.preview[:, :, inner[0], inner[1]]
+                yield Progress(stage="final" if tile is None else f"final (tile {i + 1}/{len(parts)})",
+                               iteration=i * p.tv_iter + rec.iteration, n_iterations=n_all,
+                               loss=rec.loss, control_points=cp, preview=preview, stage_index=n_path,
+                               n_stages=n_path + 1, info=rec.info)
+            if tile is None:
+                out = res
+            else:
+                out[:, :, core[0], core[1]] = res[:, :, inner[0], inner[1]]
     else:
         out = np.asarray(arr, dtype=np.float32).copy()
     t2 = time.perf_counter()

@@ -42,6 +42,7 @@ __all__ = [
     "BlurOperator",
     "simulate_blur",
     "validate_lightfield",
+    "validate_frame",
     "to_tensor",
     "from_tensor",
     "normalized_coordinates",
@@ -112,6 +113,20 @@ def normalized_coordinates(n: int, r: float, dtype=torch.float32, device=None) -
     return (torch.arange(n, dtype=dtype, device=device) - (n - 1) / 2.0) / r
 
 
+def validate_frame(frame, shape):
+    """Check a tile's ``(y0, x0, Y_full, X_full)`` against the tile's ``shape``; None passes."""
+    if frame is None:
+        return None
+    try:
+        y0, x0, Yf, Xf = (int(v) for v in frame)
+    except (TypeError, ValueError):
+        raise ValueError(f"frame must be (y0, x0, Y_full, X_full); got {frame!r}") from None
+    Y, X = shape[2], shape[3]
+    if y0 < 0 or x0 < 0 or y0 + Y > Yf or x0 + X > Xf:
+        raise ValueError(f"a {Y}x{X} tile at ({y0}, {x0}) does not fit in a {Yf}x{Xf} frame")
+    return (y0, x0, Yf, Xf)
+
+
 def _lerp_taps(coord: torch.Tensor, size: int):
     """Clamped bilinear taps for sample coordinates ``coord`` on an axis of ``size``.
 
@@ -138,7 +153,7 @@ def _interp_matrices(shift: torch.Tensor, size: int) -> torch.Tensor:
     return (1.0 - w)[..., None] * m0 + w[..., None] * m1
 
 
-def angular_shifts(positions: torch.Tensor, shape):
+def angular_shifts(positions: torch.Tensor, shape, frame=None):
     """``s_u(x, t_k) = p_x - x~ p_z`` and ``s_v(y, t_k) = p_y - y~ p_z`` (MODEL.md).
 
     Parameters
@@ -146,6 +161,10 @@ def angular_shifts(positions: torch.Tensor, shape):
     positions : torch.Tensor, shape (T, 3)
     shape : tuple
         ``(V, U, Y, X, ...)`` of the light field.
+    frame : tuple of 4 int, optional
+        ``(y0, x0, Y_full, X_full)`` when the light field is the tile at
+        ``(y0, x0)`` of a larger one: ``x~, y~`` are then those of the full
+        frame.
 
     Returns
     -------
@@ -153,9 +172,10 @@ def angular_shifts(positions: torch.Tensor, shape):
     s_v : torch.Tensor, shape (T, Y)
     """
     Y, X = shape[2], shape[3]
-    r = max(X, Y) / 2.0
-    xt = normalized_coordinates(X, r, positions.dtype, positions.device)
-    yt = normalized_coordinates(Y, r, positions.dtype, positions.device)
+    y0, x0, Yf, Xf = (0, 0, Y, X) if frame is None else frame
+    r = max(Xf, Yf) / 2.0
+    xt = normalized_coordinates(Xf, r, positions.dtype, positions.device)[x0 : x0 + X]
+    yt = normalized_coordinates(Yf, r, positions.dtype, positions.device)[y0 : y0 + Y]
     return (
         positions[:, 0:1] - xt[None, :] * positions[:, 2:3],
         positions[:, 1:2] - yt[None, :] * positions[:, 2:3],
@@ -406,6 +426,12 @@ class BlurOperator:
     block_elements : int, optional
         Temporary memory of one block, in elements; by default
         ``DEFAULT_BLOCK_ELEMENTS`` of the device type.
+    frame : tuple of 4 int, optional
+        ``(y0, x0, Y_full, X_full)``: the light fields are the tile at
+        ``(y0, x0)`` of a ``Y_full x X_full`` one, whose normalised
+        coordinates ``x~, y~`` (hence ``p_z``'s shifts) apply. The boundary
+        stays the tile's own (replicate), so tiles of a larger light field
+        need an overlap when ``d_inf != 0``.
 
     Notes
     -----
@@ -431,11 +457,13 @@ class BlurOperator:
         device="auto",
         dtype=torch.float32,
         block_elements: int | None = None,
+        frame=None,
     ):
         shape = tuple(int(s) for s in shape)
         if len(shape) not in (4, 5) or min(shape) < 1:
             raise ValueError(f"shape must be (V, U, Y, X[, C]) of positive sizes; got {shape}")
         self.shape = shape[:4] + ((shape[4],) if len(shape) == 5 else (1,))
+        self.frame = validate_frame(frame, self.shape)
         self.n_times = validate_n_times(n_times)
         try:
             self.infinity_disparity = float(infinity_disparity)
@@ -459,7 +487,7 @@ class BlurOperator:
         self.positions = bezier_positions(cp, self.n_times)
         V, U = self.shape[:2]
         #: angular shifts s_u (T, X) and s_v (T, Y) of every instant
-        self.s_u, self.s_v = angular_shifts(self.positions, self.shape)
+        self.s_u, self.s_v = angular_shifts(self.positions, self.shape, self.frame)
         if self.infinity_disparity == 0.0:
             # one kernel for the whole exposure
             self._kernels = [tap_kernel(self.s_u, self.s_v, U, V)]

@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from ._progress import Progress, run_to_completion
-from .blur import BlurOperator, from_tensor, interpolation_matrices, to_tensor, validate_lightfield
+from .blur import BlurOperator, from_tensor, interpolation_matrices, to_tensor, validate_frame, validate_lightfield
 from .devices import select_device
 from .path import bezier_positions, validate_control_points, validate_n_times
 from .priors import divergence4d, gradient_magnitude4d, gradient_norm_bound, project_tv_dual
@@ -358,6 +358,7 @@ def iter_deconvolve(
     params: DeconvolutionParams | dict | None = None,
     device="auto",
     init=None,
+    frame=None,
     **overrides,
 ):
     """Deconvolve a light field blurred by a known path, as a generator.
@@ -375,10 +376,11 @@ def iter_deconvolve(
     p = _make_params(params, overrides)
     method = _choose_method(p.method, cp, d_inf)
     dev = select_device(device)
-    return _run(arr, cp, n_times, d_inf, p, method, dev, init)
+    frame = validate_frame(frame, arr.shape)
+    return _run(arr, cp, n_times, d_inf, p, method, dev, init, frame)
 
 
-def _run(arr, cp, n_times, d_inf, p, method, dev, init):
+def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
     weight = p.effective_weight(method)
     f = to_tensor(arr, device=dev)
     if method == "inplane":
@@ -389,7 +391,7 @@ def _run(arr, cp, n_times, d_inf, p, method, dev, init):
         yield Progress(stage="inplane", iteration=1, n_iterations=1, info={"weight": weight, "method": method},
                        preview=out if p.preview_every else None)
         return out
-    op = BlurOperator(f.shape, cp, n_times=n_times, infinity_disparity=d_inf, device=dev)
+    op = BlurOperator(f.shape, cp, n_times=n_times, infinity_disparity=d_inf, device=dev, frame=frame)
     x0 = f if init is None else to_tensor(init, device=dev)
     x = yield from _iter_tv(op, f, x0, p, weight, arr.ndim)
     return from_tensor(x, arr.ndim)
@@ -404,6 +406,7 @@ def deconvolve(
     params: DeconvolutionParams | dict | None = None,
     device="auto",
     init=None,
+    frame=None,
     callback=None,
     **overrides,
 ) -> np.ndarray:
@@ -426,6 +429,10 @@ def deconvolve(
     device : {'auto', 'cpu', 'cuda'}, default 'auto'
     init : ndarray, optional
         Initial estimate for ``'tv'`` (default: the blurred input).
+    frame : tuple of 4 int, optional
+        ``(y0, x0, Y_full, X_full)`` when ``blurred`` is the tile at ``(y0, x0)``
+        of a larger light field (for tiled processing): ``p_z``'s shifts are
+        then those of the full frame (see :class:`~napari_lfdeblur.blur.BlurOperator`).
     callback : callable, optional
         Called with each :class:`~napari_lfdeblur._progress.Progress` record.
 
@@ -452,7 +459,7 @@ def deconvolve(
     """
     gen = iter_deconvolve(
         blurred, control_points, n_times=n_times, infinity_disparity=infinity_disparity,
-        params=params, device=device, init=init, **overrides,
+        params=params, device=device, init=init, frame=frame, **overrides,
     )
     return run_to_completion(gen, callback)
 
