@@ -1045,8 +1045,8 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
     last_preview = -math.inf
 
     def record(stage, fac, it, cur, latent, loss=float("nan"), **extra):
-        n_outer = stages[stage][2]
         nonlocal n_records, last_preview
+        n_outer = stages[stage][2]
         n_records += 1
         preview = None
         if make_preview is not None and p.preview_every and n_records % p.preview_every == 0 \
