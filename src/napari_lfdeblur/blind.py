@@ -1218,11 +1218,12 @@ def iter_blind_deblur(
     dev = select_device(device)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise ValueError(f"seed must be an integer; got {seed!r}")
-    dev = plan_device(dev, estimate_blind_memory(arr.shape, p), tiles_possible=True)
+    need = estimate_blind_memory(arr.shape, p)
+    dev = plan_device(dev, need, tiles_possible=True)
     tile = plan_tiles(arr.shape, p, _free_memory(dev))
     if tile is not None:
         warnings.warn(
-            f"blind deblurring needs about {estimate_blind_memory(arr.shape, p) / 2**30:.2f} GiB, more than is "
+            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than is "
             f"available: estimating the path on the central {tile[0]}x{tile[1]} pixels and restoring the light "
             f"field in overlapping tiles of {tile[0]}x{tile[1]}",
             RuntimeWarning,
