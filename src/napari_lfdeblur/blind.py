@@ -157,9 +157,20 @@ class BlindParams:
     edge_sigma : float
         The salient-edge latent is taken to be sharper than the scene by a
         spatial Gaussian of this many pixels, applied inside the model, so
-        that the path need not absorb the edge profile (0: off). Helps on
-        rendered light fields with crisp edges; hurts on small-disparity
-        captures (docs/blind.md).
+        that the path need not absorb the edge profile (0: off). Without it
+        the path comes out inflated (docs/blind.md).
+    edge_sigma_from : int
+        The edge model is used from this alternation of the first level on
+        (1: from the start). Used from the start it lets the Gaussian
+        explain the whole of a small blur, and the path stays too short; the
+        first alternations therefore find the (inflated) path without it.
+    disparity_weight : float
+        The pixels of the path fit are drawn with a probability also
+        proportional to ``(|d| / max|d| + 0.02) ** disparity_weight``, ``d``
+        the disparity estimated from the blurred light field itself (which
+        stays consistent across views). Where ``|d|`` is small the blur
+        moves the scene by little more than its edge profile, and a
+        salient-edge latent misleads the fit most (0: uniform).
     tiles : int
         With ``p_z`` estimated, the fit takes the blur kernel constant over
         ``tiles x tiles`` tiles of the image.
@@ -169,7 +180,8 @@ class BlindParams:
         Also try the mirrored path ``-p`` at every alternation (a local
         minimum of the fit for curved paths), keeping the better.
     estimate_z : bool
-        Estimate ``p_z`` (out-of-plane motion); False keeps the path in-plane.
+        Estimate ``p_z`` (out-of-plane motion) in a last stage; False keeps
+        the path in-plane.
     z_outer : int
         With ``estimate_z``, alternations of a last stage, on the finest
         level, in which ``p_z`` is free; it starts from the in-plane estimate
@@ -225,13 +237,15 @@ class BlindParams:
     n_random: int = 500
     n_random_later: int = 200
     fit_robust: float = 0.3
-    edge_sigma: float = 0.0
+    edge_sigma: float = 0.5
+    edge_sigma_from: int = 4
+    disparity_weight: float = 4.0
     n_perturb: int = 4
     perturb: float = 0.3
     tiles: int = 4
     z_box: float = 0.5
     try_mirror: bool = True
-    estimate_z: bool = False
+    estimate_z: bool = True
     z_outer: int = 3
     # joint (paper)
     n_iter: int = 1000
@@ -253,7 +267,7 @@ class BlindParams:
             raise ValueError(f"unknown blind method {self.method!r}: choose one of {', '.join(METHODS)}")
         ints = {
             "n_control_points": 2, "n_times": 2, "n_levels": 1, "min_size": 4, "n_outer": 1,
-            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "n_random": 0, "n_random_later": 0, "n_perturb": 0, "z_outer": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
+            "n_restarts": 1, "max_size": 0, "n_pixels": 16, "tiles": 1, "n_random": 0, "n_random_later": 0, "n_perturb": 0, "edge_sigma_from": 1, "z_outer": 0, "n_cg": 1, "path_steps": 1, "n_iter": 0, "tv_iter": 0,
             "final_n_times": 2, "preview_every": 0,
         }
         for name, lo in ints.items():
@@ -263,7 +277,7 @@ class BlindParams:
             if v < lo:
                 raise ValueError(f"BlindParams.{name} must be >= {lo}; got {v}")
             object.__setattr__(self, name, int(v))
-        nonneg = ("max_extent", "z_box", "latent_angular_weight", "perturb", "init_length", "fit_robust", "edge_sigma", "l0_weight", "l0_floor", "path_tol", "prior_weight",
+        nonneg = ("max_extent", "z_box", "latent_angular_weight", "perturb", "init_length", "fit_robust", "edge_sigma", "disparity_weight", "l0_weight", "l0_floor", "path_tol", "prior_weight",
                   "prior_floor", "tv_weight", "eps_min")
         positive = ("hqs_beta_max", "path_lr", "lf_lr", "eps", "l0_decay", "prior_decay", "eps_decay")
         for name in nonneg + positive:
@@ -696,6 +710,24 @@ def _shear(f: torch.Tensor, d: float) -> torch.Tensor:
     return out
 
 
+@torch.no_grad()
+def _disparity_map(f: torch.Tensor, d_max: float = 2.5, n: int = 41, smooth: int = 2) -> np.ndarray:
+    """Per-pixel disparity (px/view) of the (blurred) light field (V, U, Y, X, 1): the shear that
+    makes the views agree best (least angular variance, box-smoothed over ``2 smooth + 1`` px)."""
+    best = None
+    for d in np.linspace(-d_max, d_max, n):
+        var = _shear(f, float(d)).var(dim=(0, 1))[..., 0]  # (Y, X)
+        var = torch.nn.functional.avg_pool2d(var[None, None], 2 * smooth + 1, stride=1, padding=smooth,
+                                             count_include_pad=False)[0, 0]
+        if best is None:
+            best, arg = var, torch.full_like(var, float(d))
+        else:
+            m = var < best
+            best = torch.where(m, var, best)
+            arg = torch.where(m, torch.full_like(var, float(d)), arg)
+    return arg.cpu().numpy()
+
+
 def _downsample(f: torch.Tensor, factor: int) -> torch.Tensor:
     """Area-average the spatial axes by ``factor`` (views untouched)."""
     if factor == 1:
@@ -838,7 +870,7 @@ class _GramLoss:
     latent, after which a path step costs a few small products.
     """
 
-    def __init__(self, f, n_pixels, rng, T, box_xy, box_z, tiles, chunk=256):
+    def __init__(self, f, n_pixels, rng, T, box_xy, box_z, tiles, chunk=256, weight=None):
         V, U, Y, X, _ = f.shape
         self.V, self.U, self.Y, self.X, self.T = V, U, Y, X, T
         self.R = int(min(max(V, U) - 1, math.floor(box_xy + box_z) + 1))
@@ -860,6 +892,8 @@ class _GramLoss:
             if idx.size == 0:
                 continue
             pr = flat[idx] + 0.05 * flat.mean() + 1e-12
+            if weight is not None:
+                pr = pr * weight[: Y - 1, : X - 1].ravel()[idx]
             pr = pr / pr.sum()
             k = min(per, idx.size)
             sel.append(np.sort(rng.choice(idx, size=k, replace=False, p=pr)))
@@ -954,6 +988,8 @@ class _GramLoss:
         return quad * self.scale
 
 
+#: floor of the disparity weights of the fit's pixels (relative to the largest |d|)
+DISPARITY_FLOOR = 0.02
 #: Adam steps of the path fit between two progress reports
 FIT_REPORT_EVERY = 10
 #: the path fit stops when its best fit improved by less than this (relative) in FIT_PATIENCE steps
@@ -1060,12 +1096,17 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
         )
 
     latent = None
+    disparity = {}  # level factor -> pixel weights of the fit
     for stage, (fac, free_z, n_outer) in enumerate(stages):
         f = _downsample(g, fac)
         shape = tuple(f.shape)
         d_lvl = d_inf / fac
         n_lvl = n_cp if stage >= len(factors) - 1 else min(n_cp, n_start + stage)
-        sub = _GramLoss(f, p.n_pixels, rng, T, box, box * p.z_box if free_z else 0.0, p.tiles if free_z else 1)
+        if p.disparity_weight > 0 and fac not in disparity:
+            d = np.abs(_disparity_map(f))
+            disparity[fac] = (d / max(float(d.max()), 1e-6) + DISPARITY_FLOOR) ** p.disparity_weight
+        sub = _GramLoss(f, p.n_pixels, rng, T, box, box * p.z_box if free_z else 0.0, p.tiles if free_z else 1,
+                        weight=disparity.get(fac))
         lam = lam0
         if latent is None or latent.shape != f.shape:
             latent = f.clone()
@@ -1073,12 +1114,14 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
         if not free_z:
             cur[:, 2] = 0.0
         still = 0
+        es_from = p.edge_sigma_from if stage == 0 else 1  # the edge model from this alternation on
         for outer in range(1, n_outer + 1):
+            sigma = p.edge_sigma if outer >= es_from else 0.0
             base = (outer - 1) * per_outer
             tick = 0
             op = BlurOperator(shape, cur, n_times=T, infinity_disparity=d_lvl, device=device)
-            if p.edge_sigma > 0:
-                op = _EdgeBlurred(op, p.edge_sigma)
+            if sigma > 0:
+                op = _EdgeBlurred(op, sigma)
             gen, x = _l0_latent(op, f, lam, p, latent), None
             while True:
                 try:
@@ -1089,7 +1132,7 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
                 tick = min(tick + 1, per_outer - 1)
                 yield record(stage, fac, base + tick, cur, x, alternation=outer, phase="latent", **{"lambda": lam})
             del gen, x, op
-            sub.set_latent(latent, cur if (cp is not None or outer > 1) else None, p.fit_robust, p.edge_sigma)
+            sub.set_latent(latent, cur if (cp is not None or outer > 1) else None, p.fit_robust, sigma)
             if cp is None and outer == 1:
                 candidates = [elevate_degree(c, n_lvl) for c in starts]
                 for _ in range(p.n_random):
@@ -1136,7 +1179,7 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
             lam = max(lam * p.l0_decay, p.l0_weight * p.l0_floor)
             yield record(stage, fac, outer * per_outer, cur, latent, loss=loss, alternation=outer, phase="done",
                          move=move, **{"lambda": lam})
-            still = still + 1 if move < p.path_tol else 0
+            still = still + 1 if (move < p.path_tol and outer > es_from) else 0
             if still >= 2:
                 break
         cp = cur
