@@ -324,9 +324,35 @@ def test_bad_input_gives_clear_errors():
         BlindParams(fit_robust=-0.1)
     with pytest.raises(ValueError, match="edge_sigma"):
         BlindParams(edge_sigma=float("nan"))
+    with pytest.raises(ValueError, match="edge_sigma_from"):
+        BlindParams(edge_sigma_from=0)
+    with pytest.raises(ValueError, match="disparity_weight"):
+        BlindParams(disparity_weight=-1.0)
 
 
 # ------------------------------------------------------------ pieces
+
+
+def test_disparity_map_finds_the_disparity_of_each_half():
+    # left half: a noise texture at d = +1 px/view; right half: another at d = -2 (exact integer shifts)
+    V = U = 5
+    Y, X, pad = 32, 48, 12
+    rng = np.random.default_rng(0)
+    tex = rng.uniform(0, 1, (2, Y + 2 * pad, X + 2 * pad))
+    lf = np.empty((V, U, Y, X, 1), np.float32)
+    for v in range(V):
+        for u in range(U):
+            dv, du = v - (V - 1) // 2, u - (U - 1) // 2
+            left = tex[0, pad - dv : pad - dv + Y, pad - du : pad - du + X]
+            right = tex[1, pad + 2 * dv : pad + 2 * dv + Y, pad + 2 * du : pad + 2 * du + X]
+            lf[v, u, :, :, 0] = np.where(np.arange(X) < X // 2, left, right)
+    # blurred by an in-plane path, the views stay consistent at the same disparity
+    lf = simulate_blur(lf, linear_path(1.0), n_times=8)
+    d = blind._disparity_map(torch.as_tensor(lf))
+    assert d.shape == (Y, X)
+    m = 2 * 2 + 2  # the smoothing window and the largest shift of a view
+    np.testing.assert_allclose(d[m:-m, m : X // 2 - m], 1.0, atol=0.13)
+    np.testing.assert_allclose(d[m:-m, X // 2 + m : -m], -2.0, atol=0.13)
 
 
 def test_sparse_gradient_prior_matches_definition():

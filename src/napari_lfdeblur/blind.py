@@ -829,11 +829,15 @@ def _gauss_yx(L: torch.Tensor, sigma: float) -> torch.Tensor:
     t = torch.arange(-r, r + 1, dtype=L.dtype, device=L.device)
     k = torch.exp(-0.5 * (t / sigma) ** 2)
     k = k / k.sum()
-    V, U, Y, X, C = L.shape
-    z = L.permute(0, 1, 4, 2, 3).reshape(V * U * C, 1, Y, X)
-    z = torch.nn.functional.conv2d(z, k.view(1, 1, -1, 1), padding=(r, 0))
-    z = torch.nn.functional.conv2d(z, k.view(1, 1, 1, -1), padding=(0, r))
-    return z.reshape(V, U, C, Y, X).permute(0, 1, 3, 4, 2)
+    # separable, by shifted adds (conv2d on these shapes is about 20x slower on the CPU)
+    for dim in (2, 3):
+        n = L.shape[dim]
+        out = L * k[r]
+        for j in range(1, min(r, n - 1) + 1):
+            out.narrow(dim, j, n - j).add_(L.narrow(dim, 0, n - j), alpha=float(k[r - j]))
+            out.narrow(dim, 0, n - j).add_(L.narrow(dim, j, n - j), alpha=float(k[r + j]))
+        L = out
+    return L
 
 
 class _EdgeBlurred:

@@ -1,0 +1,93 @@
+"""Diagnostic: how far the salient-edge latent alone moves the path fit off the truth.
+
+For each case, a salient-edge latent is computed *at the true path* (three
+half-quadratic splitting solves, ``lambda`` 4e-3, 2e-3, 1e-3, as the first
+alternations do), with the edge model ``K_p G_sigma`` for each ``sigma`` given.
+The path is then fitted to that latent, from the true path and from 300 random
+starts, and the blur mismatch (FINDINGS.md, section 3) of the fit started at the
+truth and of the best fit is printed. With the true sharp light field as the
+latent both are 0.02 to 0.05, so what this prints is the latent's share of the
+path error. docs/blind.md ("The edge model, switched on late") quotes its figures.
+
+Usage::
+
+    python benchmarks/blind_latent_at_true_path.py [--cases syn-p1,lytro-p1,lytro2-p4] [--sigmas 0,0.3,0.5,0.8]
+
+In-plane cases only (the true path's ``p_z`` is dropped for the latent).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _eval_module():
+    spec = importlib.util.spec_from_file_location("blind_eval", ROOT / "benchmarks" / "blind_eval.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["blind_eval"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _finish(gen):
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", default="syn-p1,lytro-p1,lytro2-p4")
+    ap.add_argument("--sigmas", default="0,0.3,0.5,0.8")
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    ev = _eval_module()
+    from napari_lfdeblur import blind as B
+    from napari_lfdeblur.blur import BlurOperator
+    from napari_lfdeblur.metrics import path_error
+    from napari_lfdeblur.path import center_path
+
+    p = B.BlindParams()
+    T = p.n_times
+    for name in args.cases.split(","):
+        case = ev.make_case(name)
+        g = torch.as_tensor(case.blurred, dtype=torch.float32).mean(-1, keepdim=True)
+        V, U = g.shape[:2]
+        box = max(0.5, 0.35 * (min(V, U) - 1))
+        true = center_path(case.control_points, T)
+        true[:, 2] = 0.0
+        for sigma in (float(s) for s in args.sigmas.split(",")):
+            op = BlurOperator(tuple(g.shape), true, n_times=T, device="cpu")
+            if sigma > 0:
+                op = B._EdgeBlurred(op, sigma)
+            latent = g.clone()
+            for lam in (4e-3, 2e-3, 1e-3):
+                latent = _finish(B._l0_latent(op, g, lam, p, latent))
+            rng = np.random.default_rng(0)
+            fit = B._GramLoss(g, p.n_pixels, rng, T, box, 0.0, 1)
+            fit.set_latent(latent, true, p.fit_robust, sigma)
+            starts = [true] + [np.c_[rng.uniform(-1, 1, (4, 2)) * p.init_length, np.zeros(4)] for _ in range(300)]
+            pp = B._PathParam(np.stack(starts), T, box, "cpu", free_z=False)
+            pp.project()
+            scores = _finish(B._fit_path(pp, fit, p.path_steps, p.path_lr)).numpy()
+            cps = pp.control_points().detach().double().numpy()
+            k = int(np.argmin(scores))
+            from_true = path_error(cps[0], case.control_points, lightfield=case.sharp).blur_mismatch
+            best = path_error(cps[k], case.control_points, lightfield=case.sharp).blur_mismatch
+            print(f"{name:9s} edge sigma {sigma:4.2f} px  blur mismatch: fit from the true path {from_true:.3f}, "
+                  f"best fit {best:.3f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
