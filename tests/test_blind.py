@@ -7,6 +7,7 @@ import weakref
 import numpy as np
 import pytest
 import torch
+from scipy.ndimage import gaussian_filter
 
 from napari_lfdeblur import blind
 from napari_lfdeblur.blind import (
@@ -620,3 +621,32 @@ def test_solvers_never_leave_the_caller_without_grad(linear_case):
     with torch.no_grad():
         res = blind_deblur(small, params=BlindParams().replace(n_outer=1, path_steps=20, tv_iter=2), device="cpu")
     assert np.isfinite(res.control_points).all()
+
+
+def test_disparity_weights_of_a_large_view_come_from_a_downsampled_map(monkeypatch):
+    # a light field whose left half has twice the disparity of the right half: the weights
+    # (|d| / max|d| + floor) ** power say so whether the map is estimated at full resolution
+    # or, for large views, at a lower one
+    V = U = 5
+    Y, X, pad = 24, 40, 12
+    rng = np.random.default_rng(1)
+    # smooth texture: on raw noise, bilinear shifts bias the least-variance match at fractional disparities
+    tex = gaussian_filter(rng.uniform(0, 1, (2, Y + 2 * pad, X + 2 * pad)), (0, 1.5, 1.5))
+    lf = np.empty((V, U, Y, X, 1), np.float32)
+    for v in range(V):
+        for u in range(U):
+            dv, du = v - (V - 1) // 2, u - (U - 1) // 2
+            left = tex[0, pad - 2 * dv : pad - 2 * dv + Y, pad - 2 * du : pad - 2 * du + X]
+            right = tex[1, pad - dv : pad - dv + Y, pad - du : pad - du + X]
+            lf[v, u, :, :, 0] = np.where(np.arange(X) < X // 2, left, right)
+    f = torch.as_tensor(lf)
+    full = blind._disparity_weights(f, 1.0)
+    monkeypatch.setattr(blind, "DISPARITY_PIXELS", Y * X // 4)  # -> estimated at half resolution
+    half = blind._disparity_weights(f, 1.0)
+    assert full.shape == half.shape == (Y, X)
+    floor = blind.DISPARITY_FLOOR
+    for w in (full, half):
+        # power 1: w - floor is |d| / max|d|, so the two halves' ratio is that of their disparities
+        left = np.median(w[6:-6, 6 : X // 2 - 6]) - floor
+        right = np.median(w[6:-6, X // 2 + 6 : -6]) - floor
+        assert left / right == pytest.approx(2.0, rel=0.08)

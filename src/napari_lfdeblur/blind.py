@@ -728,6 +728,23 @@ def _disparity_map(f: torch.Tensor, d_max: float = 2.5, n: int = 41, smooth: int
     return arg.cpu().numpy()
 
 
+#: pixels (about) on which the disparity map of the fit's weights is estimated; larger views are
+#: area-averaged down to it (the weights depend on |d| / max|d| only, which this keeps)
+DISPARITY_PIXELS = 160 * 160
+#: floor of the disparity weights of the fit's pixels (relative to the largest |d|)
+DISPARITY_FLOOR = 0.02
+
+
+def _disparity_weights(f: torch.Tensor, power: float) -> np.ndarray:
+    """Pixel weights ``(|d| / max|d| + DISPARITY_FLOOR) ** power`` of the fit, (Y, X) float64."""
+    Y, X = f.shape[2:4]
+    k = max(1, int(math.sqrt(Y * X / DISPARITY_PIXELS)))
+    d = np.abs(_disparity_map(_downsample(f, k)))
+    w = (d / max(float(d.max()), 1e-6) + DISPARITY_FLOOR) ** power
+    w = np.repeat(np.repeat(w, k, axis=0), k, axis=1)
+    return np.pad(w, ((0, Y - w.shape[0]), (0, X - w.shape[1])), mode="edge")
+
+
 def _downsample(f: torch.Tensor, factor: int) -> torch.Tensor:
     """Area-average the spatial axes by ``factor`` (views untouched)."""
     if factor == 1:
@@ -992,8 +1009,6 @@ class _GramLoss:
         return quad * self.scale
 
 
-#: floor of the disparity weights of the fit's pixels (relative to the largest |d|)
-DISPARITY_FLOOR = 0.02
 #: Adam steps of the path fit between two progress reports
 FIT_REPORT_EVERY = 10
 #: the path fit stops when its best fit improved by less than this (relative) in FIT_PATIENCE steps
@@ -1107,8 +1122,7 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
         d_lvl = d_inf / fac
         n_lvl = n_cp if stage >= len(factors) - 1 else min(n_cp, n_start + stage)
         if p.disparity_weight > 0 and fac not in disparity:
-            d = np.abs(_disparity_map(f))
-            disparity[fac] = (d / max(float(d.max()), 1e-6) + DISPARITY_FLOOR) ** p.disparity_weight
+            disparity[fac] = _disparity_weights(f, p.disparity_weight)
         sub = _GramLoss(f, p.n_pixels, rng, T, box, box * p.z_box if free_z else 0.0, p.tiles if free_z else 1,
                         weight=disparity.get(fac))
         lam = lam0
