@@ -23,7 +23,12 @@ Two algorithms, chosen by :attr:`BlindParams.method`:
        step), whose piecewise-constant result has step edges whatever the
        current path, and
        (b) the path fitted to that latent in the gradient domain,
-       ``min_p ||grad_yx(K_p l_s) - grad_yx f||^2``, by Adam;
+       ``min_p ||grad_yx(K_p l_s) - grad_yx f||^2``, by Adam, on pixels drawn
+       with a preference for strong gradients and large disparity (read off
+       the blurred input), where the latent's over-sharp edges mislead the
+       fit least; from the ``edge_sigma_from``-th alternation the latent is
+       modelled as sharper than the scene by a spatial Gaussian
+       (``K_p G_sigma``), so that the path need not absorb the edge profile;
     3. the fit has many local minima, so every alternation fits a wide batch
        of paths at once (cheap: the fit is a small quadratic form in the
        blur kernel) and keeps the best: at first short lines in spread
@@ -35,7 +40,9 @@ Two algorithms, chosen by :attr:`BlindParams.method`:
     4. the zero-mean gauge holds throughout (the control points are
        re-centred inside every step) and the path is kept in a box of the
        aperture (FINDINGS.md, section 3);
-    5. the path found, each colour channel is restored by the 4D-TV
+    5. with ``estimate_z``, a last stage frees ``p_z``, starting from the
+       in-plane path;
+    6. the path found, each colour channel is restored by the 4D-TV
        non-blind :func:`~napari_lfdeblur.deconvolution.deconvolve`.
 
 ``'joint'`` (the ``paper`` preset)
@@ -846,7 +853,7 @@ def _gauss_yx(L: torch.Tensor, sigma: float) -> torch.Tensor:
     t = torch.arange(-r, r + 1, dtype=L.dtype, device=L.device)
     k = torch.exp(-0.5 * (t / sigma) ** 2)
     k = k / k.sum()
-    # separable, by shifted adds (conv2d on these shapes is about 20x slower on the CPU)
+    # separable, by shifted adds (conv2d on these shapes is about 15x slower on the CPU)
     for dim in (2, 3):
         n = L.shape[dim]
         out = L * k[r]
