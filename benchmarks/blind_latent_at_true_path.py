@@ -19,30 +19,12 @@ In-plane cases only (the true path's ``p_z`` is dropped for the latent).
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import torch
+from blind_dev import _eval_module  # benchmarks/ is on the path when this script runs
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _eval_module():
-    spec = importlib.util.spec_from_file_location("blind_eval", ROOT / "benchmarks" / "blind_eval.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["blind_eval"] = mod
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def _finish(gen):
-    while True:
-        try:
-            next(gen)
-        except StopIteration as stop:
-            return stop.value
+from napari_lfdeblur._progress import run_to_completion
 
 
 def main(argv=None):
@@ -73,14 +55,14 @@ def main(argv=None):
                 op = B._EdgeBlurred(op, sigma)
             latent = g.clone()
             for lam in (4e-3, 2e-3, 1e-3):
-                latent = _finish(B._l0_latent(op, g, lam, p, latent))
+                latent = run_to_completion(B._l0_latent(op, g, lam, p, latent))
             rng = np.random.default_rng(0)
             fit = B._GramLoss(g, p.n_pixels, rng, T, box, 0.0, 1)
             fit.set_latent(latent, true, p.fit_robust, sigma)
             starts = [true] + [np.c_[rng.uniform(-1, 1, (4, 2)) * p.init_length, np.zeros(4)] for _ in range(300)]
             pp = B._PathParam(np.stack(starts), T, box, "cpu", free_z=False)
             pp.project()
-            scores = _finish(B._fit_path(pp, fit, p.path_steps, p.path_lr)).numpy()
+            scores = run_to_completion(B._fit_path(pp, fit, p.path_steps, p.path_lr)).numpy()
             cps = pp.control_points().detach().double().numpy()
             k = int(np.argmin(scores))
             from_true = path_error(cps[0], case.control_points, lightfield=case.sharp).blur_mismatch

@@ -650,3 +650,31 @@ def test_disparity_weights_of_a_large_view_come_from_a_downsampled_map(monkeypat
         left = np.median(w[6:-6, 6 : X // 2 - 6]) - floor
         right = np.median(w[6:-6, X // 2 + 6 : -6]) - floor
         assert left / right == pytest.approx(2.0, rel=0.08)
+
+
+def test_edge_model_starts_at_edge_sigma_from_and_runs_two_alternations_before_stopping(monkeypatch):
+    lf = _scene((5, 5, 20, 20), seed=4)
+    blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
+    built = []
+
+    class Recording(blind._EdgeBlurred):
+        def __init__(self, op, sigma):
+            built.append(sigma)
+            super().__init__(op, sigma)
+
+    monkeypatch.setattr(blind, "_EdgeBlurred", Recording)
+    base = dict(path_steps=20, n_random=10, n_random_later=5, tv_iter=0, estimate_z=False, edge_sigma=0.5,
+                edge_sigma_from=3)
+
+    def alternations(**kw):
+        built.clear()
+        gen = iter_blind_deblur(blurred, device="cpu", **{**base, **kw})
+        return max(r.info["alternation"] for r in gen if r.info.get("phase") == "done")
+
+    # never still: all 6 alternations, the edge model in alternations 3..6 only
+    assert alternations(n_outer=6, path_tol=0.0) == 6 and built == [0.5] * 4
+    # always still: moves count as still only after alternation 3, so the level stops after 5
+    # (two still alternations after the switch), the edge model having run in 3, 4 and 5
+    assert alternations(n_outer=9, path_tol=1e9) == 5 and built == [0.5] * 3
+    # edge_sigma = 0: no edge model at all
+    assert alternations(n_outer=4, path_tol=0.0, edge_sigma=0.0) == 4 and built == []

@@ -721,17 +721,15 @@ def _shear(f: torch.Tensor, d: float) -> torch.Tensor:
 def _disparity_map(f: torch.Tensor, d_max: float = 2.5, n: int = 41, smooth: int = 2) -> np.ndarray:
     """Per-pixel disparity (px/view) of the (blurred) light field (V, U, Y, X, 1): the shear that
     makes the views agree best (least angular variance, box-smoothed over ``2 smooth + 1`` px)."""
-    best = None
+    best = torch.full(f.shape[2:4], math.inf, dtype=f.dtype, device=f.device)
+    arg = torch.zeros_like(best)
     for d in np.linspace(-d_max, d_max, n):
         var = _shear(f, float(d)).var(dim=(0, 1))[..., 0]  # (Y, X)
         var = torch.nn.functional.avg_pool2d(var[None, None], 2 * smooth + 1, stride=1, padding=smooth,
                                              count_include_pad=False)[0, 0]
-        if best is None:
-            best, arg = var, torch.full_like(var, float(d))
-        else:
-            m = var < best
-            best = torch.where(m, var, best)
-            arg = torch.where(m, torch.full_like(var, float(d)), arg)
+        better = var < best
+        best = torch.where(better, var, best)
+        arg = arg.masked_fill(better, float(d))
     return arg.cpu().numpy()
 
 
@@ -915,13 +913,14 @@ class _GramLoss:
         per = max(1, int(n_pixels) // (tiles * tiles))
         sel, sel_tile = [], []
         flat = score.ravel()
+        flat_w = None if weight is None else weight[: Y - 1, : X - 1].ravel()
         for t in range(tiles * tiles):
             idx = np.flatnonzero(tile_of == t)
             if idx.size == 0:
                 continue
             pr = flat[idx] + 0.05 * flat.mean() + 1e-12
-            if weight is not None:
-                pr = pr * weight[: Y - 1, : X - 1].ravel()[idx]
+            if flat_w is not None:
+                pr = pr * flat_w[idx]
             pr = pr / pr.sum()
             k = min(per, idx.size)
             sel.append(np.sort(rng.choice(idx, size=k, replace=False, p=pr)))
