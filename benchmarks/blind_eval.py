@@ -78,18 +78,24 @@ PATHS = {
     # held out in the second development session; looked at in the third
     "p4": (4, 2.5, 0.0, 104),
     "p5": (4, 2.0, 0.3, 105),
-    # fresh: added at the end of the third session and run once, never used to choose settings
+    # added at the end of the third session and run once; looked at in the fourth
     "p6": (4, 2.5, 0.0, 106),
     "p7": (4, 2.5, 0.4, 107),
+    # fresh: added in the fourth session before any run on them, never used to choose settings
+    "p8": (4, 2.5, 0.0, 108),
+    "p9": (4, 2.0, 0.4, 109),
 }
 
-#: cases used while developing the solver; held-out cases (scenes ``syn2`` and ``lytro2``, paths
-#: ``p4`` and ``p5``), not used to choose settings in the second session but measured while
-#: developing the third; fresh cases (``syn3``, ``lytro3``, paths ``p6``, ``p7``), run only to
+#: cases used while developing the solver, in the order they were added: development cases;
+#: held-out cases (scenes ``syn2`` and ``lytro2``, paths ``p4`` and ``p5``), not used to choose
+#: settings in the second session but measured while developing the third; the third session's
+#: fresh cases (``syn3``, ``lytro3``, paths ``p6``, ``p7``), run once then, measured while
+#: developing the fourth; fresh cases (``syn4``, ``lytro4``, paths ``p8``, ``p9``), run only to
 #: report. The report gives the means of each group.
 DEV_CASES = [f"{s}-{p}" for s in ("syn", "lytro") for p in ("p1", "p2", "p3")]
 HELD_OUT_CASES = [f"{s}-{p}" for s in ("syn2", "lytro2") for p in ("p4", "p5")]
-FRESH_CASES = [f"{s}-{p}" for s in ("syn3", "lytro3") for p in ("p6", "p7")]
+SEEN_CASES = [f"{s}-{p}" for s in ("syn3", "lytro3") for p in ("p6", "p7")]
+FRESH_CASES = [f"{s}-{p}" for s in ("syn4", "lytro4") for p in ("p8", "p9")]
 #: the full Lytro capture the ``lytro2`` crop comes from (beside the repository; the environment
 #: variable LFDEBLUR_LYTRO_CAPTURE overrides)
 LYTRO_CAPTURE = Path(os.environ.get("LFDEBLUR_LYTRO_CAPTURE", ROOT.parent / "shared" / "data" / "lytro-f01-img0001"))
@@ -136,16 +142,17 @@ def _scene(name: str, quick: bool):
     if name == "syn2":
         lf, _ = synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=2)
         return lf
-    if name == "syn3":
-        lf, _ = synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=3)
+    if name in ("syn3", "syn4"):
+        lf, _ = synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=int(name[-1]))
         return lf
-    if name in ("lytro2", "lytro3"):
+    if name in ("lytro2", "lytro3", "lytro4"):
         from napari_lfdeblur import read_lightfield
 
         # lytro2: the top-left 128 x 128 pixels of the capture (the `lytro` crop is pixels 64..191);
-        # lytro3: the bottom-right ones; same views
+        # lytro3: the bottom-right ones; lytro4: the top-right ones; same views
         lf = read_lightfield(LYTRO_CAPTURE)
-        win = (slice(None, 128), slice(None, 128)) if name == "lytro2" else (slice(-128, None), slice(-128, None))
+        win = {"lytro2": (slice(None, 128), slice(None, 128)), "lytro3": (slice(-128, None), slice(-128, None)),
+               "lytro4": (slice(None, 128), slice(-128, None))}[name]
         return np.ascontiguousarray(lf[1:10, 1:10, win[0], win[1]], dtype=np.float32)
     raise ValueError(f"unknown scene {name!r}")
 
@@ -170,7 +177,7 @@ def case_names(quick: bool) -> list[str]:
     if quick:
         return ["syn-p2"]
     names = list(DEV_CASES)
-    for c in HELD_OUT_CASES + FRESH_CASES:
+    for c in HELD_OUT_CASES + SEEN_CASES + FRESH_CASES:
         if LYTRO_CAPTURE.is_dir() or not c.startswith("lytro"):  # the capture is beside the repository
             names.append(c)
     return names
@@ -382,9 +389,9 @@ def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
     """One mean row per method (and for the input), over the cases it ran on."""
     out = []
     groups = [("", lambda c: True)]
-    if any(r["case"] in HELD_OUT_CASES + FRESH_CASES for r in rows):
+    if any(r["case"] not in DEV_CASES for r in rows):
         groups += [(" dev", lambda c: c in DEV_CASES), (" held-out", lambda c: c in HELD_OUT_CASES),
-                   (" fresh", lambda c: c in FRESH_CASES)]
+                   (" fresh in session 3", lambda c: c in SEEN_CASES), (" fresh", lambda c: c in FRESH_CASES)]
     for (label, keep), method in ((g, m) for g in groups for m in ["input (blurred)", *methods]):
         sel = [r for r in rows if r["method"] == method and "error" not in r and "skipped" not in r and keep(r["case"])]
         if not sel:
@@ -469,10 +476,15 @@ METHOD_TEXT = """\
   (`random_path(4, seed=104)`, 2.5 views, in-plane) and `p5` (`seed=105`, 2 views, with z). They
   were not used to choose settings in the second development session, but the third session's
   changes were measured on them too, so they are no longer strictly held out.
-- **Fresh cases**, added at the end of the third session and run only for this report: `syn3`
-  (`seed=3`) and `lytro3`, the bottom-right 128×128 pixels of the capture, views 2..10, each blurred
-  by `p6` (`seed=106`, 2.5 views, in-plane) and `p7` (`seed=107`, 2.5 views, with z). The
-  summary gives the means over all cases and over each group.
+- **Fresh in session 3**: `syn3` (`seed=3`) and `lytro3`, the bottom-right 128×128 pixels of the
+  capture, views 2..10, each blurred by `p6` (`seed=106`, 2.5 views, in-plane) and `p7`
+  (`seed=107`, 2.5 views, with z). Added at the end of the third session and run once for its
+  report; the fourth session measured its changes on them too.
+- **Fresh cases**, added in the fourth session before any run on them, and run only for this
+  report: `syn4` (`seed=4`) and `lytro4`, the top-right 128×128 pixels of the capture (a quarter
+  overlaps the `lytro` crop), views 2..10, each blurred by `p8` (`seed=108`, 2.5 views, in-plane)
+  and `p9` (`seed=109`, 2 views, with z). The summary gives the means over all cases and over each
+  group.
 - **Ground truth.** The true path is moved to the zero-mean gauge for T = 128, so the ground-truth
   light field is the sharp one seen from the mean camera position (MODEL.md, "Gauge of results").
 - **Image metrics** (`napari_lfdeblur.metrics`), with {crop} border pixels cropped in y and x:

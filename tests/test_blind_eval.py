@@ -65,7 +65,7 @@ def test_case_ground_truth_is_in_the_zero_mean_gauge(blind_eval):
     resid = case.blurred - clean
     assert abs(resid.std() - blind_eval.NOISE_SIGMA) < 3e-4
     with pytest.raises(ValueError, match="unknown case"):
-        blind_eval.make_case("syn-p9", quick=True)
+        blind_eval.make_case("syn-p99", quick=True)
 
 
 def test_targets_are_checked_not_assumed(blind_eval):
@@ -102,19 +102,23 @@ def test_summary_skips_failures_and_nan(blind_eval):
 
 def test_summary_gives_held_out_means_apart(blind_eval):
     held = blind_eval.HELD_OUT_CASES[0]
+    seen = blind_eval.SEEN_CASES[0]
     fresh = blind_eval.FRESH_CASES[0]
     rows = [
         {"case": "syn-p1", "method": "default", "gain": 6.0},
         {"case": "syn-p2", "method": "default", "gain": 4.0},
         {"case": held, "method": "default", "gain": 2.0},
+        {"case": seen, "method": "default", "gain": 1.0},
         {"case": fresh, "method": "default", "gain": 0.0},
     ]
     means = {m["group"]: m for m in blind_eval.summarise(rows, ["default"])}
-    assert means["all"]["gain"] == pytest.approx(3.0) and means["all"]["case"] == "**mean of 4**"
+    assert means["all"]["gain"] == pytest.approx(2.6) and means["all"]["case"] == "**mean of 5**"
     assert means["dev"]["gain"] == pytest.approx(5.0)
     assert means["held-out"]["gain"] == pytest.approx(2.0) and means["held-out"]["case"] == "**mean of 1 held-out**"
+    assert means["fresh in session 3"]["gain"] == pytest.approx(1.0)
     assert means["fresh"]["gain"] == pytest.approx(0.0) and means["fresh"]["case"] == "**mean of 1 fresh**"
-    groups = [set(blind_eval.DEV_CASES), set(blind_eval.HELD_OUT_CASES), set(blind_eval.FRESH_CASES)]
+    groups = [set(blind_eval.DEV_CASES), set(blind_eval.HELD_OUT_CASES), set(blind_eval.SEEN_CASES),
+              set(blind_eval.FRESH_CASES)]
     assert sum(len(g) for g in groups) == len(set.union(*groups))  # disjoint
 
 
