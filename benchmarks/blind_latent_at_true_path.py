@@ -44,7 +44,7 @@ def main(argv=None):
     T = p.n_times
     for name in args.cases.split(","):
         case = ev.make_case(name)
-        g = torch.as_tensor(case.blurred, dtype=torch.float32).mean(-1, keepdim=True)
+        g = B._gray(torch.as_tensor(case.blurred, dtype=torch.float32))
         V, U = g.shape[:2]
         box = max(0.5, 0.35 * (min(V, U) - 1))
         true = center_path(case.control_points, T)

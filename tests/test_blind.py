@@ -334,19 +334,26 @@ def test_bad_input_gives_clear_errors():
 # ------------------------------------------------------------ pieces
 
 
+def _two_disparity_halves(Y, X, d_left, d_right, seed, smooth=0.0, V=5, pad=12):
+    """A (V, V, Y, X, 1) light field: two textures seen at integer disparities ``d_left`` (left
+    half) and ``d_right`` (right half) px/view, each view an exact shift of its texture."""
+    tex = np.random.default_rng(seed).uniform(0, 1, (2, Y + 2 * pad, X + 2 * pad))
+    if smooth > 0:
+        tex = gaussian_filter(tex, (0, smooth, smooth))
+    lf = np.empty((V, V, Y, X, 1), np.float32)
+    for v in range(V):
+        for u in range(V):
+            dv, du = v - (V - 1) // 2, u - (V - 1) // 2
+            left = tex[0, pad - d_left * dv : pad - d_left * dv + Y, pad - d_left * du : pad - d_left * du + X]
+            right = tex[1, pad - d_right * dv : pad - d_right * dv + Y, pad - d_right * du : pad - d_right * du + X]
+            lf[v, u, :, :, 0] = np.where(np.arange(X) < X // 2, left, right)
+    return lf
+
+
 def test_disparity_map_finds_the_disparity_of_each_half():
     # left half: a noise texture at d = +1 px/view; right half: another at d = -2 (exact integer shifts)
-    V = U = 5
-    Y, X, pad = 32, 48, 12
-    rng = np.random.default_rng(0)
-    tex = rng.uniform(0, 1, (2, Y + 2 * pad, X + 2 * pad))
-    lf = np.empty((V, U, Y, X, 1), np.float32)
-    for v in range(V):
-        for u in range(U):
-            dv, du = v - (V - 1) // 2, u - (U - 1) // 2
-            left = tex[0, pad - dv : pad - dv + Y, pad - du : pad - du + X]
-            right = tex[1, pad + 2 * dv : pad + 2 * dv + Y, pad + 2 * du : pad + 2 * du + X]
-            lf[v, u, :, :, 0] = np.where(np.arange(X) < X // 2, left, right)
+    Y, X = 32, 48
+    lf = _two_disparity_halves(Y, X, 1, -2, seed=0)
     # blurred by an in-plane path, the views stay consistent at the same disparity
     lf = simulate_blur(lf, linear_path(1.0), n_times=8)
     d = blind._disparity_map(torch.as_tensor(lf))
@@ -627,19 +634,9 @@ def test_disparity_weights_of_a_large_view_come_from_a_downsampled_map(monkeypat
     # a light field whose left half has twice the disparity of the right half: the weights
     # (|d| / max|d| + floor) ** power say so whether the map is estimated at full resolution
     # or, for large views, at a lower one
-    V = U = 5
-    Y, X, pad = 24, 40, 12
-    rng = np.random.default_rng(1)
+    Y, X = 24, 40
     # smooth texture: on raw noise, bilinear shifts bias the least-variance match at fractional disparities
-    tex = gaussian_filter(rng.uniform(0, 1, (2, Y + 2 * pad, X + 2 * pad)), (0, 1.5, 1.5))
-    lf = np.empty((V, U, Y, X, 1), np.float32)
-    for v in range(V):
-        for u in range(U):
-            dv, du = v - (V - 1) // 2, u - (U - 1) // 2
-            left = tex[0, pad - 2 * dv : pad - 2 * dv + Y, pad - 2 * du : pad - 2 * du + X]
-            right = tex[1, pad - dv : pad - dv + Y, pad - du : pad - du + X]
-            lf[v, u, :, :, 0] = np.where(np.arange(X) < X // 2, left, right)
-    f = torch.as_tensor(lf)
+    f = torch.as_tensor(_two_disparity_halves(Y, X, 2, 1, seed=1, smooth=1.5))
     full = blind._disparity_weights(f, 1.0)
     monkeypatch.setattr(blind, "DISPARITY_PIXELS", Y * X // 4)  # -> estimated at half resolution
     half = blind._disparity_weights(f, 1.0)
