@@ -22,7 +22,6 @@ import sys
 import threading
 import time
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 

@@ -220,8 +220,16 @@ def test_params_json_round_trip_and_overrides():
     q = DeconvolutionParams.from_json(p.to_json())
     assert q == p and q.axis_weights == (1.0, 1.0, 2.0, 2.0)
     assert DeconvolutionParams.from_dict(json.loads(p.to_json())) == p
-    with pytest.raises(ValueError, match="unknown deconvolution parameter"):
+    with pytest.raises(ValueError, match="unknown deconvolution parameter.*known: .*n_iter"):
         DeconvolutionParams.from_dict({"method": "tv", "bogus": 1})
+    with pytest.raises(ValueError, match="unknown deconvolution parameter"):
+        p.replace(iterations=3)
+    assert p.replace(n_iter=9) == DeconvolutionParams(method="tv", weight=0.01, n_iter=9, axis_weights=(1, 1, 2, 2))
+    for text in ("{not json", None):
+        with pytest.raises(ValueError, match="invalid JSON for DeconvolutionParams"):
+            DeconvolutionParams.from_json(text)
+    with pytest.raises(ValueError, match="needs a dict"):
+        DeconvolutionParams.from_json("[1, 2]")
     lf = np.random.default_rng(7).random((3, 3, 6, 6)).astype(np.float32)
     recs = []
     deconvolve(lf, linear_path(1.0, z=1.0), n_times=4, params=p, n_iter=2, tol=0.0, callback=recs.append)

@@ -57,15 +57,15 @@ since the blur does not depend on the order of the positions.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 import warnings
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
+from ._params import JsonParams
 from ._progress import Progress, run_to_completion
 from .blur import BlurOperator, _lerp_taps, validate_lightfield
 from .devices import select_device
@@ -91,7 +91,7 @@ METHODS = ("alternating", "joint")
 
 
 @dataclass(frozen=True)
-class BlindParams:
+class BlindParams(JsonParams):
     """Parameters of :func:`blind_deblur`. Frozen; save with :meth:`to_json`.
 
     Attributes
@@ -269,6 +269,8 @@ class BlindParams:
     final_n_times: int = 32
     preview_every: int = 10
 
+    _what = "blind"
+
     def __post_init__(self):
         if self.method not in METHODS:
             raise ValueError(f"unknown blind method {self.method!r}: choose one of {', '.join(METHODS)}")
@@ -316,45 +318,6 @@ class BlindParams:
             return PRESETS[name]
         except (KeyError, TypeError):
             raise ValueError(f"unknown blind preset {name!r}: choose one of {', '.join(PRESETS)}") from None
-
-    def replace(self, **changes) -> "BlindParams":
-        """A copy with some fields changed (checked like the constructor)."""
-        _check_keys(changes)
-        return replace(self, **changes)
-
-    def to_dict(self) -> dict:
-        """The parameters as a plain dict."""
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "BlindParams":
-        """Parameters from a dict; missing keys take the default, unknown keys are an error."""
-        if not isinstance(d, dict):
-            raise ValueError(f"BlindParams.from_dict needs a dict; got {type(d).__name__}")
-        _check_keys(d)
-        return cls(**d)
-
-    def to_json(self) -> str:
-        """The parameters as a JSON text."""
-        return json.dumps(self.to_dict(), indent=2)
-
-    @classmethod
-    def from_json(cls, text: str) -> "BlindParams":
-        """Parameters from a JSON text written by :meth:`to_json`."""
-        try:
-            d = json.loads(text)
-        except (json.JSONDecodeError, TypeError) as exc:
-            raise ValueError(f"invalid JSON for BlindParams: {exc}") from None
-        return cls.from_dict(d)
-
-
-def _check_keys(d):
-    known = {f.name for f in fields(BlindParams)}
-    unknown = sorted(set(d) - known)
-    if unknown:
-        raise ValueError(
-            f"unknown blind parameter(s): {', '.join(map(str, unknown))}; known: {', '.join(sorted(known))}"
-        )
 
 
 #: named parameter sets

@@ -30,18 +30,18 @@
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 import torch
 
+from ._params import JsonParams
 from ._progress import Progress, run_to_completion
 from .blur import BlurOperator, from_tensor, interpolation_matrices, to_tensor, validate_frame, validate_lightfield
 from .devices import select_device
 from .path import bezier_positions, validate_control_points, validate_n_times
-from .priors import divergence4d, gradient_magnitude4d, gradient_norm_bound, project_tv_dual
+from .priors import divergence4d, gradient_norm_bound, project_tv_dual
 
 __all__ = [
     "DeconvolutionParams",
@@ -65,7 +65,7 @@ DEFAULT_WEIGHTS = {"tv": 2e-3, "inplane": 2e-3}
 
 
 @dataclass(frozen=True)
-class DeconvolutionParams:
+class DeconvolutionParams(JsonParams):
     """Parameters of :func:`deconvolve`.
 
     Attributes
@@ -100,6 +100,8 @@ class DeconvolutionParams:
     axis_weights: tuple = (1.0, 1.0, 1.0, 1.0)
     clip: bool = True
     preview_every: int = 0
+
+    _what = "deconvolution"
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -136,27 +138,6 @@ class DeconvolutionParams:
         d = asdict(self)
         d["axis_weights"] = list(self.axis_weights)
         return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "DeconvolutionParams":
-        if not isinstance(d, dict):
-            raise ValueError(f"DeconvolutionParams.from_dict needs a dict; got {type(d).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown deconvolution parameter(s): {', '.join(unknown)}")
-        return cls(**d)
-
-    def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=2)
-
-    @classmethod
-    def from_json(cls, text: str) -> "DeconvolutionParams":
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"invalid JSON for DeconvolutionParams: {exc}") from None
-        return cls.from_dict(d)
 
 
 def _number(value, name: str) -> float:

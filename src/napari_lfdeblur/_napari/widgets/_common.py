@@ -18,7 +18,7 @@ import traceback
 import numpy as np
 from napari.qt.threading import thread_worker
 from napari.utils.notifications import show_error, show_info, show_warning
-from qtpy.QtCore import Qt, Signal
+from qtpy.QtCore import Signal
 from qtpy.QtWidgets import (
     QAbstractItemView,
     QCheckBox,
@@ -46,7 +46,6 @@ from ..layers import (
     epi_layer_data,
     layer_kind,
     lightfield_from_layer,
-    remove_layer,
 )
 
 log = logging.getLogger(__name__)
