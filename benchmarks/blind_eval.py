@@ -99,6 +99,8 @@ FRESH_CASES = [f"{s}-{p}" for s in ("syn4", "lytro4") for p in ("p8", "p9")]
 #: the full Lytro capture the ``lytro2`` crop comes from (beside the repository; the environment
 #: variable LFDEBLUR_LYTRO_CAPTURE overrides)
 LYTRO_CAPTURE = Path(os.environ.get("LFDEBLUR_LYTRO_CAPTURE", ROOT.parent / "shared" / "data" / "lytro-f01-img0001"))
+#: the capture's names are IMG_0001_KKK_RR_CC.png with RR the horizontal view index
+LYTRO_PATTERN = r"_(?P<col>\d+)_(?P<row>\d+)\.png$"
 
 
 def true_path(name: str) -> np.ndarray:
@@ -149,8 +151,9 @@ def _scene(name: str, quick: bool):
         from napari_lfdeblur import read_lightfield
 
         # lytro2: the top-left 128 x 128 pixels of the capture (the `lytro` crop is pixels 64..191);
-        # lytro3: the bottom-right ones; lytro4: the top-right ones; same views
-        lf = read_lightfield(LYTRO_CAPTURE)
+        # lytro3: the bottom-right ones; lytro4: the top-right ones; same views. The capture's file
+        # names give the horizontal view index first (read as named, u would move the image along y)
+        lf = read_lightfield(LYTRO_CAPTURE, pattern=LYTRO_PATTERN)
         win = {"lytro2": (slice(None, 128), slice(None, 128)), "lytro3": (slice(-128, None), slice(-128, None)),
                "lytro4": (slice(None, 128), slice(-128, None))}[name]
         return np.ascontiguousarray(lf[1:10, 1:10, win[0], win[1]], dtype=np.float32)
@@ -465,7 +468,11 @@ METHOD_TEXT = """\
 
 - **Cases.** `syn`: `synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=1)`,
   layered textured planes at disparities 0.25..1.5 px/view with occlusions. `lytro`: the real Lytro
-  crop `lytro_sample()` (9×9×128×128×3; its content moves about 0.6 px/view). Each is blurred by three
+  crop `lytro_sample()` (9×9×128×128×3; its content moves about 0.63 px/view). Its views, and those of
+  the other Lytro crops below, are laid out as MODEL.md says (u moves the image along x): the
+  capture's file names give the horizontal view index first, and before the fifth session the
+  package read them as named, so the Lytro cases of earlier reports were the same crops with their
+  view axes swapped (`views_transposed`; docs/io.md). Each is blurred by three
   fixed random cubic Bézier paths (`random_path(4, seed=101..103)`, scaled so that the largest distance
   between two positions is 2 views for `p1`, 3 for `p2` and 2.5 for `p3`, which also moves in z),
   rendered with **T = 128** instants — far more than a

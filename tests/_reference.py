@@ -58,3 +58,15 @@ def blur_reference(lf, cp, n_times, d_inf=0.0):
         out += acc
     out /= n_times
     return out[..., 0] if gray else out
+
+
+def moving_texture(n_views=5, d=1.5, size=48, seed=0):
+    """A Lambertian light field at one disparity laid out as MODEL.md says: a smooth random
+    texture that moves by ``d`` px along x per step of u and along y per step of v (circularly)."""
+    from scipy import ndimage
+
+    tex = ndimage.gaussian_filter(np.random.default_rng(seed).random((size, size)), 1.5)
+    c = (n_views - 1) / 2
+    lf = np.stack([np.stack([ndimage.shift(tex, (d * (v - c), d * (u - c)), order=3, mode="wrap")
+                             for u in range(n_views)]) for v in range(n_views)])
+    return ((lf - lf.min()) / (lf.max() - lf.min())).astype(np.float32)

@@ -20,11 +20,13 @@ import pytest
 import scipy.io
 import tifffile
 
+from _reference import moving_texture
 from napari_lfdeblur.io import (
     InsufficientMemoryError,
     LightFieldError,
     LightFieldFormatError,
     LightFieldReadError,
+    ViewOrderWarning,
     detect_layout,
     probe_layout,
     read_lightfield,
@@ -84,7 +86,9 @@ def _lytro_views(folder, lf8):
 def lytro():
     if not LYTRO.is_dir():
         pytest.skip(f"real data not found at {LYTRO}")
-    return read_lightfield_with_metadata(LYTRO)
+    # the capture's names number the views the other way round (RR is the horizontal one)
+    with pytest.warns(ViewOrderWarning, match="look transposed.*pattern="):
+        return read_lightfield_with_metadata(LYTRO)
 
 
 def test_real_lytro_folder(lytro):
@@ -99,6 +103,42 @@ def test_real_lytro_folder(lytro):
         ref = iio.imread(f).astype(np.float32) / 255
         np.testing.assert_allclose(lf[rr - 1, cc - 1], ref, atol=1e-6)
     assert 0.0 <= lf.min() and lf.max() <= 1.0
+    # the whole scene moves about 0.6 px/view (data README), across the axes: u moves y, v moves x
+    np.testing.assert_allclose(meta["view_shifts"], [[0.0, 0.64], [0.64, 0.0]], atol=0.05)
+
+
+def test_real_lytro_folder_read_the_right_way_round(lytro, recwarn):
+    lf, _ = lytro
+    fixed, meta = read_lightfield_with_metadata(LYTRO, pattern=r"_(?P<col>\d+)_(?P<row>\d+)\.\w+$")
+    assert not [w for w in recwarn if issubclass(w.category, ViewOrderWarning)]
+    np.testing.assert_array_equal(fixed, lf.swapaxes(0, 1))
+    np.testing.assert_allclose(meta["view_shifts"], [[0.64, 0.0], [0.0, 0.64]], atol=0.05)
+
+
+def test_transposed_views_warn_on_read_and_upright_ones_do_not(tmp_path, recwarn):
+    lf = moving_texture()
+    np.save(tmp_path / "upright.npy", lf)
+    np.save(tmp_path / "transposed.npy", lf.swapaxes(0, 1))
+    back, meta = read_lightfield_with_metadata(tmp_path / "upright.npy")
+    assert not [w for w in recwarn if issubclass(w.category, ViewOrderWarning)]
+    np.testing.assert_allclose(meta["view_shifts"], [[1.5, 0.0], [0.0, 1.5]], atol=0.05)
+    with pytest.warns(ViewOrderWarning, match=r"transposed.*swapaxes\(0, 1\)") as rec:
+        back, _ = read_lightfield_with_metadata(tmp_path / "transposed.npy")
+    assert "pattern=" not in str(rec[0].message)  # only folders of views have names to reinterpret
+    np.testing.assert_array_equal(back, lf.swapaxes(0, 1))  # warned about, never changed
+
+
+def test_reading_views_in_threads_leaves_the_warning_filters_alone(tmp_path):
+    """Decoding views in threads once left a process-wide 'ignore all warnings' filter behind."""
+    import warnings
+
+    folder = _lytro_views(tmp_path / "cap", _u8(np.random.default_rng(3).random((6, 6, 40, 40, 3))))
+    before = list(warnings.filters)
+    for _ in range(3):
+        read_lightfield(folder, workers=6)
+    assert warnings.filters == before
+    with pytest.warns(UserWarning, match="still heard"):
+        warnings.warn("still heard", UserWarning)
 
 
 # ------------------------------------------------------------------ folder layouts

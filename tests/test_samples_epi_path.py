@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from _reference import bezier_reference
+from _reference import bezier_reference, moving_texture
 from napari_lfdeblur import (
     arc_path,
     bezier_positions,
@@ -19,6 +19,8 @@ from napari_lfdeblur import (
     save_path_json,
     synthetic_scene,
     vertical_epi,
+    view_shifts,
+    views_transposed,
 )
 from napari_lfdeblur.path import PRESETS, preset_path
 
@@ -77,10 +79,52 @@ def test_lytro_sample_is_the_crop_of_the_capture():
         pytest.skip("shared Lytro data not present")
     import imageio.v3 as iio
 
-    for rr, cc in [(2, 2), (6, 9), (10, 10)]:
+    # the capture's names give the horizontal view index first (RR): file RR_CC is view (CC, RR)
+    for rr, cc in [(2, 2), (6, 9), (10, 10), (9, 3)]:
         (f,) = LYTRO_DIR.glob(f"IMG_0001_*_{rr:02d}_{cc:02d}.png")
         view = iio.imread(f)[64:192, 64:192, :3] / 255.0
-        np.testing.assert_allclose(lf[rr - 2, cc - 2], view, atol=1e-6)
+        np.testing.assert_allclose(lf[cc - 2, rr - 2], view, atol=1e-6)
+
+
+def test_lytro_sample_views_are_laid_out_as_model_md_says():
+    """u moves the image along x and v along y, both by the scene's ~0.6 px/view (data README)."""
+    lf = lytro_sample()
+    np.testing.assert_allclose(view_shifts(lf), [[0.6, 0.0], [0.0, 0.6]], atol=0.06)
+    assert views_transposed(lf) is False
+
+
+def test_view_shifts_measure_the_disparity_along_the_right_axes():
+    for d in (1.5, -0.6, 0.35):
+        lf = moving_texture(n_views=5, d=d)
+        np.testing.assert_allclose(view_shifts(lf), [[d, 0.0], [0.0, d]], atol=0.05)
+        np.testing.assert_allclose(view_shifts(lf.swapaxes(0, 1)), [[0.0, d], [d, 0.0]], atol=0.05)
+        assert views_transposed(lf) is False and views_transposed(lf.swapaxes(0, 1)) is True
+    colour = np.repeat(moving_texture(n_views=3, d=1.0)[..., None], 3, axis=-1)
+    np.testing.assert_allclose(view_shifts(colour), [[1.0, 0.0], [0.0, 1.0]], atol=0.05)
+    # a scene in focus (every view alike) cannot tell, nor can one moving diagonally in both
+    flat = np.repeat(np.repeat(moving_texture(n_views=1)[:, :1], 5, axis=0), 5, axis=1)
+    assert views_transposed(flat) is None
+    diag = moving_texture(n_views=5, d=1.0)
+    diag = diag + diag.swapaxes(0, 1)
+    assert views_transposed(diag) is None
+
+
+def test_view_shifts_bad_input():
+    with pytest.raises(ValueError, match="4D"):
+        view_shifts(np.zeros((5, 32, 32)))
+    with pytest.raises(ValueError, match="at least 2 x 2 views"):
+        view_shifts(np.zeros((1, 5, 32, 32)))
+    with pytest.raises(ValueError, match="8 x 8 px"):
+        view_shifts(np.zeros((3, 3, 4, 32)))
+
+
+def test_epi_module_examples_run():
+    import doctest
+
+    import napari_lfdeblur.epi
+
+    result = doctest.testmod(napari_lfdeblur.epi)
+    assert result.attempted >= 4 and result.failed == 0
 
 
 def test_epis_are_the_right_slices():

@@ -35,6 +35,8 @@ _PUBLIC = {
     # epipolar images
     "horizontal_epi": "epi",
     "vertical_epi": "epi",
+    "view_shifts": "epi",
+    "views_transposed": "epi",
     # sample data
     "synthetic_scene": "samples",
     "lytro_sample": "samples",

@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from ._lightfield import validate_lightfield
 from .devices import select_device
 from .path import bezier_positions, validate_control_points, validate_n_times
 
@@ -60,37 +61,6 @@ DEFAULT_BLOCK_ELEMENTS = {"cpu": 1 << 22, "cuda": 1 << 24}
 
 
 # ----------------------------------------------------------------- arrays
-
-
-def validate_lightfield(lf, name: str = "light field") -> np.ndarray:
-    """Check a light field array and return it as a numpy array.
-
-    Accepts ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` with ``C`` in 1..4.
-
-    Raises
-    ------
-    ValueError
-        On a wrong number of dimensions, a non-numeric dtype, NaN or Inf.
-    """
-    arr = np.asarray(lf)
-    if arr.ndim not in (4, 5):
-        raise ValueError(
-            f"a {name} must be a 4D (V, U, Y, X) or 5D (V, U, Y, X, C) array; "
-            f"got {arr.ndim}D with shape {arr.shape}"
-        )
-    if arr.ndim == 5 and not 1 <= arr.shape[4] <= 4:
-        raise ValueError(
-            f"a colour {name} must have 1 to 4 channels in its last axis; got shape {arr.shape}"
-        )
-    if min(arr.shape) < 1:
-        raise ValueError(f"the {name} is empty: shape {arr.shape}")
-    if not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
-        raise ValueError(f"a {name} must hold numbers; got dtype {arr.dtype}")
-    if np.issubdtype(arr.dtype, np.complexfloating):
-        raise ValueError(f"a {name} must be real; got dtype {arr.dtype}")
-    if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
-        raise ValueError(f"the {name} contains NaN or Inf values")
-    return arr
 
 
 def to_tensor(lf, device=None, dtype=torch.float32) -> torch.Tensor:

@@ -1,4 +1,4 @@
-"""Epipolar images (EPIs) of a light field.
+"""Epipolar images (EPIs) of a light field, and the geometry of its views.
 
 A horizontal EPI fixes a view row ``v`` and a pixel row ``y`` and shows
 ``(u, x)``: a scene point at disparity ``d`` traces a line of slope ``d``
@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .blur import validate_lightfield
+from ._lightfield import validate_lightfield
 
-__all__ = ["horizontal_epi", "vertical_epi"]
+__all__ = ["horizontal_epi", "vertical_epi", "view_shifts", "views_transposed"]
 
 
 def _index(value, size, name):
@@ -61,3 +61,131 @@ def vertical_epi(lf, u: int | None = None, x: int | None = None) -> np.ndarray:
     u = U // 2 if u is None else _index(u, U, "u")
     x = X // 2 if x is None else _index(x, X, "x")
     return arr[:, u, :, x]
+
+
+def _gray_view(arr: np.ndarray, v: int, u: int) -> np.ndarray:
+    view = np.asarray(arr[v, u], dtype=np.float64)
+    return view.mean(axis=-1) if view.ndim == 3 else view
+
+
+def _register(ref: np.ndarray, moving: np.ndarray, n_refine: int = 4) -> np.ndarray:
+    """The ``(dy, dx)`` shift that, applied to ``moving``, best matches ``ref``.
+
+    Phase correlation finds it to within a fraction of a pixel (its
+    upsampled peak is biased towards whole pixels on smooth images); a few
+    Gauss-Newton steps on the squared difference (Lucas-Kanade) refine it.
+    """
+    from scipy import ndimage
+    from skimage.registration import phase_cross_correlation
+
+    shift = np.asarray(phase_cross_correlation(ref, moving, upsample_factor=10, normalization=None)[0], float)
+    for _ in range(n_refine):
+        m = ndimage.shift(moving, shift, order=3, mode="nearest")
+        b = int(np.ceil(np.abs(shift).max())) + 2
+        if min(ref.shape) <= 2 * b + 2:
+            break
+        crop = (slice(b, -b), slice(b, -b))
+        gy, gx = np.gradient(m)
+        jac = np.stack([gy[crop].ravel(), gx[crop].ravel()], axis=1)
+        step, *_ = np.linalg.lstsq(jac, (m - ref)[crop].ravel(), rcond=None)
+        shift += step
+        if np.abs(step).max() < 1e-3:
+            break
+    return shift
+
+
+def view_shifts(lf) -> np.ndarray:
+    """How far the image moves per view step along each angular axis, in px/view.
+
+    The whole centre view is registered (phase correlation refined by
+    Lucas-Kanade steps) with the views at both ends of the centre column and
+    of the centre row. For
+    a scene at one dominant disparity ``d`` laid out as in MODEL.md (a
+    point at ``x`` in view ``u`` is at ``x + d`` in view ``u + 1``, likewise
+    for ``v`` and ``y``) the result is ``[[d, 0], [0, d]]``.
+
+    Parameters
+    ----------
+    lf : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
+        At least 2 views along each angular axis and 8 x 8 px per view.
+
+    Returns
+    -------
+    ndarray, float64, shape (2, 2)
+        Row 0: the ``(y, x)`` displacement per step of ``v``; row 1: per
+        step of ``u``.
+
+    Examples
+    --------
+    A texture that moves by 2 px per view (circularly, so the shifts are exact):
+
+    >>> import numpy as np
+    >>> from napari_lfdeblur import view_shifts
+    >>> tex = np.random.default_rng(0).random((32, 32))
+    >>> lf = np.stack([np.stack([np.roll(tex, (2 * v, 2 * u), axis=(0, 1)) for u in range(5)])
+    ...                for v in range(5)])
+    >>> view_shifts(lf).round(3) + 0.0
+    array([[2., 0.],
+           [0., 2.]])
+    >>> view_shifts(lf.swapaxes(0, 1)).round(3) + 0.0  # u now moves the image along y
+    array([[0., 2.],
+           [2., 0.]])
+    """
+    arr = validate_lightfield(lf)
+    V, U, Y, X = arr.shape[:4]
+    if min(V, U) < 2 or min(Y, X) < 8:
+        raise ValueError(f"view_shifts needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
+    cv, cu = (V - 1) // 2, (U - 1) // 2
+    ref = _gray_view(arr, cv, cu)
+    out = np.zeros((2, 2))
+    for axis, (n, c) in enumerate(((V, cv), (U, cu))):
+        per_step = []
+        for end in (0, n - 1):
+            if end == c:
+                continue
+            v, u = (end, cu) if axis == 0 else (cv, end)
+            # the shift that registers the end view onto the centre one is -(end - c) * d
+            per_step.append(-_register(ref, _gray_view(arr, v, u)) / (end - c))
+        out[axis] = np.mean(per_step, axis=0)
+    return out
+
+
+def views_transposed(lf, min_shift: float = 0.1) -> bool | None:
+    """Whether the angular axes of a light field look swapped against its spatial ones.
+
+    In the layout of MODEL.md, stepping through ``u`` moves the image along
+    ``x`` and stepping through ``v`` moves it along ``y``. Exported view
+    folders sometimes name their views the other way round (the row index
+    being the horizontal one), and the light field read then moves along
+    ``y`` with ``u``: blur simulation, deconvolution and the blind solver
+    all assume the layout of MODEL.md. Swapping the first two axes
+    (``lf.swapaxes(0, 1)``) fixes such a light field.
+
+    Parameters
+    ----------
+    lf : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
+    min_shift : float, default 0.1
+        Below this many px/view of motion the views are too alike to tell.
+
+    Returns
+    -------
+    bool or None
+        True when the motion is mostly across (``u`` moves ``y``, ``v``
+        moves ``x``), False when it is mostly along the MODEL.md axes, None
+        when the scene barely moves between views (a light field focused on
+        its content) or the motion is not clearly either.
+    """
+    return _transposed(view_shifts(lf), min_shift)
+
+
+def _transposed(shifts: np.ndarray, min_shift: float = 0.1) -> bool | None:
+    """:func:`views_transposed` from the (2, 2) result of :func:`view_shifts`."""
+    s = np.abs(shifts)
+    along, across = s[0, 0] + s[1, 1], s[0, 1] + s[1, 0]
+    if max(along, across) < 2 * min_shift:
+        return None
+    if across > 2 * along:
+        return True
+    if along > 2 * across:
+        return False
+    return None

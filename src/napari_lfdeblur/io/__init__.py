@@ -26,6 +26,7 @@ wrong with it.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,7 @@ __all__ = [
     "LightFieldError",
     "LightFieldFormatError",
     "LightFieldReadError",
+    "ViewOrderWarning",
     "InsufficientMemoryError",
     "MEMORY_LIMIT_ENV",
     "available_memory",
@@ -252,7 +254,32 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
         "dtype": str(lf.dtype),
         **meta,
     }
+    _check_view_order(lf, path, metadata)
     return lf, metadata
+
+
+class ViewOrderWarning(UserWarning):
+    """The views of a light field just read look transposed against MODEL.md's layout."""
+
+
+def _check_view_order(lf, path, metadata) -> None:
+    """Record the views' motion (px/view) in ``metadata`` and warn when the view axes look swapped."""
+    from ..epi import _transposed, view_shifts
+
+    if min(lf.shape[:2]) < 2 or min(lf.shape[2:4]) < 8:
+        return
+    shifts = view_shifts(lf)
+    metadata["view_shifts"] = np.round(shifts, 3).tolist()
+    if _transposed(shifts):
+        fix = (r"pass pattern=r'_(?P<col>\d+)_(?P<row>\d+)\.\w+$' to name the numbers the other way round, or "
+               if metadata["layout"] in ("views", "hci", "stanford") else "")
+        warnings.warn(
+            f"{path}: the views look transposed: stepping through u moves the image along y by "
+            f"{shifts[1, 0]:+.2f} px/view and stepping through v moves it along x by {shifts[0, 1]:+.2f} px/view, "
+            f"where MODEL.md's layout has u move x and v move y. Blur, deconvolution and blind deblurring assume "
+            f"that layout: {fix}swap the first two axes (lf.swapaxes(0, 1)).",
+            ViewOrderWarning, stacklevel=3,
+        )
 
 
 def read_lightfield(path, *, layout: str | None = None, value_range=None, max_bytes=None, **options) -> np.ndarray:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -95,9 +94,9 @@ def read_image(path) -> np.ndarray:
             else:
                 import imageio.v3 as iio
 
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    img = iio.imread(path)
+                # called from worker threads: no warnings.catch_warnings here, whose save and
+                # restore of the process-wide filters is not thread-safe
+                img = iio.imread(path)
     except (PNGError, Exception) as exc:  # noqa: BLE001 - any decoder failure
         if isinstance(exc, FileNotFoundError):
             raise
