@@ -72,3 +72,29 @@ def test_demo_quick(tmp_path):
         # deconvolution with the known path beats the blurred input
         assert rec["psnr_db"]["deconvolved (path known)"] > rec["psnr_db"]["blurred"] + 1.0
     np.testing.assert_allclose(load_path_json(out / "synthetic_blurred.path.json"), summary["true_control_points"])
+
+
+def test_transposed_views_are_named_and_swapped_on_request(tmp_path, capsys):
+    from _reference import moving_texture
+
+    lf = moving_texture(n_views=5, d=1.0, size=32)
+    np.save(tmp_path / "upright.npy", lf)
+    np.save(tmp_path / "transposed.npy", lf.swapaxes(0, 1))
+
+    assert main(["info", str(tmp_path / "transposed.npy")]) == 0
+    out, err = capsys.readouterr()
+    assert "look transposed" in err and "--swap-views" in err and "Traceback" not in err
+    assert "view_shifts: [[0.0, 1.0], [1.0, 0.0]]" in out.replace("-0.0", "0.0")
+
+    assert main(["info", "--swap-views", str(tmp_path / "transposed.npy")]) == 0
+    out, err = capsys.readouterr()
+    assert err == "" and "view_shifts: [[1.0, 0.0], [0.0, 1.0]]" in out.replace("-0.0", "0.0")
+
+    assert main(["info", "--swap-views", str(tmp_path / "upright.npy")]) == 0
+    assert "did not look transposed" in capsys.readouterr().err
+
+    # --swap-views reads the light field the other way round: the blur is that of the upright one
+    out = tmp_path / "blurred.npz"
+    assert main(["simulate", "--swap-views", str(tmp_path / "transposed.npy"), str(out),
+                 "--path", "linear:2", "--n-times", "8"]) == 0
+    np.testing.assert_allclose(read_lightfield(out), simulate_blur(lf, linear_path(2.0), n_times=8), atol=1e-6)

@@ -28,12 +28,49 @@ def _progress(iterable=None, **kwargs):
     return tqdm(iterable, **kwargs)
 
 
-def _read(path):
-    from .io import read_lightfield
+def _input_argument(p, help_text="light field file or folder"):
+    """The INPUT positional and ``--swap-views``, shared by the commands that read a light field."""
+    p.add_argument("input", help=help_text)
+    p.add_argument("--swap-views", action="store_true",
+                   help="swap the two view axes after reading (for exports that name the horizontal view first)")
 
-    if not Path(path).exists():
-        raise CLIError(f"input {path} does not exist")
-    return read_lightfield(path)
+
+def _read(args, **options):
+    """Read ``args.input`` (a light field and its metadata), swapping the view axes on ``--swap-views``.
+
+    A :class:`~napari_lfdeblur.io.ViewOrderWarning` from the reader becomes one line on stderr that
+    names the option to use.
+    """
+    import warnings
+
+    import numpy as np
+
+    from .io import ViewOrderWarning, read_lightfield_with_metadata
+
+    if not Path(args.input).exists():
+        raise CLIError(f"input {args.input} does not exist")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ViewOrderWarning)
+        lf, meta = read_lightfield_with_metadata(args.input, **options)
+    transposed = None
+    for w in caught:
+        if issubclass(w.category, ViewOrderWarning):
+            transposed = w.message
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    if args.swap_views:
+        lf = np.ascontiguousarray(lf.swapaxes(0, 1))
+        if "view_shifts" in meta:
+            meta["view_shifts"] = np.asarray(meta["view_shifts"])[::-1].tolist()
+        if transposed is None:
+            print(f"lfdeblur {args.command}: note: the views did not look transposed; swapped them as asked",
+                  file=sys.stderr)
+    elif transposed is not None:
+        (sy, _), (_, sx) = transposed.shifts[1], transposed.shifts[0]
+        print(f"lfdeblur {args.command}: warning: the views of {args.input} look transposed (u moves the image "
+              f"along y by {sy:+.2f} px/view, v along x by {sx:+.2f}); rerun with --swap-views to read them "
+              f"the other way round", file=sys.stderr)
+    return lf, meta
 
 
 def _path_argument(text: str, n_times: int | None = None):
@@ -61,7 +98,7 @@ def _path_argument(text: str, n_times: int | None = None):
 
 def _add_simulate(sub):
     p = sub.add_parser("simulate", help="blur a light field by a known camera path")
-    p.add_argument("input", help="light field file or folder")
+    _input_argument(p)
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
     p.add_argument(
         "--path",
@@ -83,7 +120,7 @@ def _run_simulate(args):
     if out.exists() and not args.overwrite:
         raise CLIError(f"{out} exists; pass --overwrite to replace it")
     cp = _path_argument(args.path)
-    lf = _read(args.input)
+    lf, _ = _read(args)
     blurred = simulate_blur(
         lf, cp, n_times=args.n_times, infinity_disparity=args.infinity_disparity, device=args.device
     )
@@ -96,7 +133,7 @@ def _run_simulate(args):
 
 def _add_deblur(sub):
     p = sub.add_parser("deblur", help="blind deblurring: estimate the camera path and the sharp light field")
-    p.add_argument("input", help="blurred light field file or folder")
+    _input_argument(p, "blurred light field file or folder")
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
     p.add_argument("--preset", default="default", help="parameter preset: default or paper (default: default)")
     p.add_argument("--params", help="a JSON file of BlindParams (overrides --preset)")
@@ -123,7 +160,7 @@ def _run_deblur(args):
         params = BlindParams.from_json(Path(args.params).read_text())
     else:
         params = BlindParams.preset(args.preset)
-    lf = _read(args.input)
+    lf, _ = _read(args)
     gen = iter_blind_deblur(lf, infinity_disparity=args.infinity_disparity, params=params,
                             device=args.device, seed=args.seed)
     bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
@@ -174,7 +211,7 @@ def _run_demo(args):
 
 def _add_info(sub):
     p = sub.add_parser("info", help="describe a light field: layout, shape, dtype, value range, metadata")
-    p.add_argument("input", help="light field file or folder")
+    _input_argument(p)
     p.add_argument("--layout", default=None, help="override the detected layout (views, hci, stanford, eslf, "
                    "mosaic, mat, h5, npy, npz, tiff)")
     p.add_argument("--grid", default=None, help="V,U view grid (mosaic layout)")
@@ -184,11 +221,7 @@ def _add_info(sub):
 def _run_info(args):
     import json
 
-    from .io import read_lightfield_with_metadata
-
-    if not Path(args.input).exists():
-        raise CLIError(f"input {args.input} does not exist")
-    options = {}
+    options = {"layout": args.layout}
     if args.grid:
         try:
             options["grid"] = tuple(int(g) for g in args.grid.replace("x", ",").split(","))
@@ -196,7 +229,7 @@ def _run_info(args):
             raise CLIError(f"--grid {args.grid!r}: expected V,U such as 9,9") from None
     if args.angular_size:
         options["angular_size"] = args.angular_size
-    lf, meta = read_lightfield_with_metadata(args.input, layout=args.layout, **options)
+    lf, meta = _read(args, **options)
     print(f"path:        {meta['source']}")
     print(f"layout:      {meta['layout']}")
     print(f"shape:       {lf.shape}  (V, U, Y, X{', C' if lf.ndim == 5 else ''})")
@@ -213,7 +246,7 @@ def _run_info(args):
 
 def _add_deconvolve(sub):
     p = sub.add_parser("deconvolve", help="undo the blur of a known camera path (non-blind)")
-    p.add_argument("input", help="blurred light field file or folder")
+    _input_argument(p, "blurred light field file or folder")
     p.add_argument("path_json", help="JSON file of the path's control points (as written by simulate)")
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
     p.add_argument("--method", default="auto", choices=["auto", "tv", "inplane"],
@@ -249,7 +282,7 @@ def _run_deconvolve(args):
     d_inf = args.infinity_disparity
     if d_inf is None:
         d_inf = float(doc.get("infinity_disparity", 0.0))
-    blurred = _read(args.input)
+    blurred, _ = _read(args)
     gen = iter_deconvolve(
         blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device,
         method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,

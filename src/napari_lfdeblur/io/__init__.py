@@ -259,7 +259,10 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
 
 
 class ViewOrderWarning(UserWarning):
-    """The views of a light field just read look transposed against MODEL.md's layout."""
+    """The views of a light field just read look transposed against MODEL.md's layout.
+
+    Its ``shifts`` attribute holds the measurement, as :func:`~napari_lfdeblur.view_shifts` returns it.
+    """
 
 
 def _check_view_order(lf, path, metadata) -> None:
@@ -273,13 +276,14 @@ def _check_view_order(lf, path, metadata) -> None:
     if _transposed(shifts):
         fix = (r"pass pattern=r'_(?P<col>\d+)_(?P<row>\d+)\.\w+$' to name the numbers the other way round, or "
                if metadata["layout"] in ("views", "hci", "stanford") else "")
-        warnings.warn(
+        warning = ViewOrderWarning(
             f"{path}: the views look transposed: stepping through u moves the image along y by "
             f"{shifts[1, 0]:+.2f} px/view and stepping through v moves it along x by {shifts[0, 1]:+.2f} px/view, "
             f"where MODEL.md's layout has u move x and v move y. Blur, deconvolution and blind deblurring assume "
-            f"that layout: {fix}swap the first two axes (lf.swapaxes(0, 1)).",
-            ViewOrderWarning, stacklevel=3,
+            f"that layout: {fix}swap the first two axes (lf.swapaxes(0, 1))."
         )
+        warning.shifts = shifts
+        warnings.warn(warning, stacklevel=3)
 
 
 def read_lightfield(path, *, layout: str | None = None, value_range=None, max_bytes=None, **options) -> np.ndarray:
