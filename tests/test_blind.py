@@ -535,19 +535,33 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
     sharp = _scene((5, 5, 72, 72), seed=6)
     cp = np.array([[-0.6, 0.2, -0.3], [0.5, -0.3, 0.3]])
     blurred = simulate_blur(sharp, cp, n_times=32)
-    p = BlindParams().replace(n_control_points=2, n_outer=2, path_steps=60, tv_iter=20, final_n_times=8)
+    p = BlindParams().replace(n_control_points=2, n_outer=2, path_steps=60, tv_iter=20, final_n_times=8,
+                              preview_every=5)
     full = blind.estimate_blind_memory(blurred.shape, p)
     monkeypatch.setattr(blind, "_free_memory", lambda device: full // 2)
+    monkeypatch.setattr(blind, "PREVIEW_MIN_INTERVAL", 0.0)
     with pytest.warns(RuntimeWarning, match="overlapping tiles"):
         gen = iter_blind_deblur(blurred, params=p, device="cpu")
-    stages = set()
+    stages, previews = set(), []
     while True:
         try:
-            stages.add(next(gen).stage)
+            rec = next(gen)
+            stages.add(rec.stage)
+            if rec.stage.startswith("path") and rec.preview is not None:
+                previews.append(rec.preview)
         except StopIteration as stop:
             res = stop.value
             break
     assert res.info["tile"][0] < 72 and any(s.startswith("final (tile 2/") for s in stages)
+    # the path-stage previews show the central crop where it is in the full frame, edge-padded around it
+    c = min(72, res.info["tile"][0] + 2 * blind.TILE_MARGIN)
+    o = (72 - c) // 2
+    assert previews and 0 < o and o + c < 72
+    for prev in previews:
+        np.testing.assert_array_equal(prev[:, :, :o], np.repeat(prev[:, :, o:o + 1], o, axis=2))
+        np.testing.assert_array_equal(prev[:, :, o + c:], np.repeat(prev[:, :, o + c - 1:o + c], 72 - o - c, axis=2))
+        np.testing.assert_array_equal(prev[:, :, :, :o], np.repeat(prev[:, :, :, o:o + 1], o, axis=3))
+        assert np.ptp(prev[:, :, o:o + c, o:o + c], axis=(2, 3)).min() > 0  # the crop itself is not padding
     assert res.lightfield.shape == blurred.shape and np.isfinite(res.lightfield).all()
     # the tiles, with their overlap, give nearly what one full-frame solve with that path gives
     ref = deconvolve(blurred, res.control_points, n_times=8, method="tv", weight=p.tv_weight, n_iter=20, tol=0.0,

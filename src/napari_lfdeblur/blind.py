@@ -1320,12 +1320,13 @@ def _empty_cache(dev):
 
 
 @torch.no_grad()
-def _preview(latent: torch.Tensor, fac: int, shape, unshear: float) -> np.ndarray:
+def _preview(latent: torch.Tensor, fac: int, shape, unshear: float, offset=(0, 0)) -> np.ndarray:
     """A path-stage latent (V, U, y, x, 1) at level ``fac`` as a preview of the input's ``shape``.
 
-    Nearest upsampling (edge-padded to the full size), the refocus of the
-    path stage undone when ``unshear`` is not 0, clipped to [0, 1] and
-    repeated over the colour channels: float32, ``shape``.
+    Nearest upsampling, placed at ``offset`` (the top-left pixel of the crop
+    the path is estimated on) and edge-padded to the full size, the refocus
+    of the path stage undone when ``unshear`` is not 0, clipped to [0, 1]
+    and repeated over the colour channels: float32, ``shape``.
     """
     V, U, Y, X = shape[:4]
     lat = latent.detach()[..., 0]
@@ -1333,7 +1334,9 @@ def _preview(latent: torch.Tensor, fac: int, shape, unshear: float) -> np.ndarra
         lat = lat.repeat_interleave(fac, dim=2).repeat_interleave(fac, dim=3)
     y, x = lat.shape[2:4]
     if (y, x) != (Y, X):
-        lat = torch.nn.functional.pad(lat.reshape(V * U, 1, y, x), (0, X - x, 0, Y - y), mode="replicate")
+        oy, ox = offset
+        lat = torch.nn.functional.pad(lat.reshape(V * U, 1, y, x), (ox, X - x - ox, oy, Y - y - oy),
+                                      mode="replicate")
         lat = lat.reshape(V, U, Y, X)
     if unshear != 0.0:
         lat = _shear(lat[..., None], -unshear)[..., 0]
@@ -1350,10 +1353,11 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points, tile=None):
     V, U, Y, X = arr.shape[:4]
     n_cp = int(n_control_points) if n_control_points is not None else p.n_control_points
     box = p.max_extent if p.max_extent > 0 else max(0.5, 0.35 * (min(V, U) - 1))
-    crop = arr
+    crop, offset = arr, (0, 0)
     if tile is not None:  # the path from the central tile-sized crop (the path is the same everywhere)
         cy, cx = min(Y, tile[0] + 2 * TILE_MARGIN), min(X, tile[1] + 2 * TILE_MARGIN)
-        crop = arr[:, :, (Y - cy) // 2 : (Y - cy) // 2 + cy, (X - cx) // 2 : (X - cx) // 2 + cx]
+        offset = ((Y - cy) // 2, (X - cx) // 2)
+        crop = arr[:, :, offset[0] : offset[0] + cy, offset[1] : offset[1] + cx]
     f = torch.as_tensor(np.ascontiguousarray(crop), dtype=torch.float32, device=dev)
     if arr.ndim == 4:
         f = f.unsqueeze(-1)
@@ -1363,7 +1367,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, n_control_points, tile=None):
     sheared = p.method == "alternating" and d_inf != 0.0
 
     def make_preview(latent, fac):
-        return _preview(latent, fac, arr.shape, d_inf if sheared else 0.0)
+        return _preview(latent, fac, arr.shape, d_inf if sheared else 0.0, offset)
 
     if p.method == "alternating":
         if sheared:
