@@ -90,10 +90,14 @@ def test_viewer_open_folder(make_napari_viewer, tmp_path, lf_rgb):
 def test_viewer_open_real_lytro(make_napari_viewer):
     if not LYTRO.is_dir():
         pytest.skip(f"real data not found at {LYTRO}")
+    from napari_lfdeblur.io import ViewOrderWarning
+
     viewer = make_napari_viewer()
-    viewer.open(str(LYTRO), plugin="napari-lfdeblur")
+    with pytest.warns(ViewOrderWarning, match="look transposed"):  # its names give the horizontal view first
+        viewer.open(str(LYTRO), plugin="napari-lfdeblur")
     (layer,) = viewer.layers
     assert layer.data.shape == (10, 10, 256, 256, 3) and layer.rgb
+    np.testing.assert_allclose(layer.metadata["view_shifts"], [[0.0, 0.64], [0.64, 0.0]], atol=0.05)
     assert tuple(layer.axis_labels) == ("v", "u", "y", "x")
 
 

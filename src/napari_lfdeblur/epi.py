@@ -99,10 +99,10 @@ def view_shifts(lf) -> np.ndarray:
 
     The whole centre view is registered (phase correlation refined by
     Lucas-Kanade steps) with the views at both ends of the centre column and
-    of the centre row. For
-    a scene at one dominant disparity ``d`` laid out as in MODEL.md (a
-    point at ``x`` in view ``u`` is at ``x + d`` in view ``u + 1``, likewise
-    for ``v`` and ``y``) the result is ``[[d, 0], [0, d]]``.
+    of the centre row. For a scene at one dominant disparity ``d`` laid out
+    as in MODEL.md (a point at ``x`` in view ``u`` is at ``x + d`` in view
+    ``u + 1``, likewise for ``v`` and ``y``) the result is
+    ``[[d, 0], [0, d]]``.
 
     Parameters
     ----------
@@ -135,6 +135,12 @@ def view_shifts(lf) -> np.ndarray:
     V, U, Y, X = arr.shape[:4]
     if min(V, U) < 2 or min(Y, X) < 8:
         raise ValueError(f"view_shifts needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
+    return _view_shifts(arr)
+
+
+def _view_shifts(arr: np.ndarray) -> np.ndarray:
+    """:func:`view_shifts` of a light field already checked (reads five views only)."""
+    V, U = arr.shape[:2]
     cv, cu = (V - 1) // 2, (U - 1) // 2
     ref = _gray_view(arr, cv, cu)
     out = np.zeros((2, 2))

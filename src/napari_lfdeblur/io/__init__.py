@@ -267,11 +267,11 @@ class ViewOrderWarning(UserWarning):
 
 def _check_view_order(lf, path, metadata) -> None:
     """Record the views' motion (px/view) in ``metadata`` and warn when the view axes look swapped."""
-    from ..epi import _transposed, view_shifts
+    from ..epi import _transposed, _view_shifts
 
     if min(lf.shape[:2]) < 2 or min(lf.shape[2:4]) < 8:
         return
-    shifts = view_shifts(lf)
+    shifts = _view_shifts(lf)
     metadata["view_shifts"] = np.round(shifts, 3).tolist()
     if _transposed(shifts):
         fix = (r"pass pattern=r'_(?P<col>\d+)_(?P<row>\d+)\.\w+$' to name the numbers the other way round, or "

@@ -30,7 +30,10 @@ def lytro_sample() -> np.ndarray:
     Views 2..10 (both directions) and pixels 64..191 of the 10 x 10 x 256 x
     256 capture ``IMG_0001`` of the repository
     ``Jaramilloh/Process-Light-Fields-Captured-With-Lytro-Camera``, under
-    CC BY 4.0. Its content moves about 0.6 px per view.
+    CC BY 4.0. Its content moves about 0.63 px per view, along ``x`` with
+    ``u`` and along ``y`` with ``v`` (:func:`~napari_lfdeblur.view_shifts`):
+    the capture's view ``RR_CC`` is ``lf[CC - 2, RR - 2]``, since its file
+    names give the horizontal index first.
     """
     import imageio.v3 as iio
 
