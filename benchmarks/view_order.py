@@ -1,0 +1,51 @@
+"""Diagnostic: the view order of the Lytro capture, and what it does to the blind solver's disparity map.
+
+Prints, for the capture in ``../shared/data/lytro-f01-img0001`` read as its
+names say (``RR`` the view row) and read the other way round, the motion per
+view step (``view_shifts``: row ``v``, then row ``u``; columns ``y``, ``x``;
+px/view), and for the four 128 x 128 Lytro crops of ``blind_eval.py`` the
+percentiles of the disparity map the blind solver weights its fit pixels by
+(``blind._disparity_map`` on the grayscale sharp crop). docs/blind.md ("The
+Lytro crops had their view axes swapped") quotes its figures.
+
+Usage::
+
+    python benchmarks/view_order.py
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import torch
+from blind_dev import _eval_module  # benchmarks/ is on the path when this script runs
+
+
+def main():
+    torch.set_num_threads(2)
+    ev = _eval_module()
+    from napari_lfdeblur import blind, read_lightfield, view_shifts
+    from napari_lfdeblur.io import ViewOrderWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ViewOrderWarning)
+        as_named = read_lightfield(ev.LYTRO_CAPTURE)
+    upright = read_lightfield(ev.LYTRO_CAPTURE, pattern=ev.LYTRO_PATTERN)
+    for label, lf in (("as named (RR = row)", as_named), ("other way round (RR = column)", upright)):
+        print(f"capture read {label}: view_shifts {np.round(view_shifts(lf), 3).tolist()}")
+    windows = {"lytro": (slice(64, 192), slice(64, 192)), "lytro2": (slice(None, 128), slice(None, 128)),
+               "lytro3": (slice(-128, None), slice(-128, None)), "lytro4": (slice(None, 128), slice(-128, None))}
+    print("| crop | read | |d| percentiles 5/25/50/75/95 | max |d| | share of |d| < 0.15 |")
+    print("|---|---|---|---|---|")
+    for name, (ys, xs) in windows.items():
+        for label, lf in (("as named", as_named), ("upright", upright)):
+            crop = np.ascontiguousarray(lf[1:10, 1:10, ys, xs])
+            d = blind._disparity_map(blind._gray(torch.as_tensor(crop)))
+            pct = np.percentile(d, [5, 25, 50, 75, 95])
+            print(f"| {name} | {label} | {' / '.join(f'{p:+.2f}' for p in pct)} | {np.abs(d).max():.2f} | "
+                  f"{(np.abs(d) < 0.15).mean():.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
