@@ -101,7 +101,7 @@ def test_view_shifts_measure_the_disparity_along_the_right_axes():
         assert views_transposed(lf) is False and views_transposed(lf.swapaxes(0, 1)) is True
     colour = np.repeat(moving_texture(n_views=3, d=1.0)[..., None], 3, axis=-1)
     np.testing.assert_allclose(view_shifts(colour), [[1.0, 0.0], [0.0, 1.0]], atol=0.05)
-    # a scene in focus (every view alike) cannot tell, nor can one moving diagonally in both
+    # a scene in focus (every view alike) cannot tell, nor can an even mix of both layouts
     flat = np.repeat(np.repeat(moving_texture(n_views=1)[:, :1], 5, axis=0), 5, axis=1)
     assert views_transposed(flat) is None
     diag = moving_texture(n_views=5, d=1.0)
