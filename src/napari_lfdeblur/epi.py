@@ -132,10 +132,14 @@ def view_shifts(lf) -> np.ndarray:
            [2., 0.]])
     """
     arr = validate_lightfield(lf)
-    V, U, Y, X = arr.shape[:4]
-    if min(V, U) < 2 or min(Y, X) < 8:
+    if not _measurable(arr.shape):
         raise ValueError(f"view_shifts needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
     return _view_shifts(arr)
+
+
+def _measurable(shape) -> bool:
+    """Whether :func:`view_shifts` can measure a light field of this shape."""
+    return min(shape[:2]) >= 2 and min(shape[2:4]) >= 8
 
 
 def _view_shifts(arr: np.ndarray) -> np.ndarray:

@@ -267,9 +267,9 @@ class ViewOrderWarning(UserWarning):
 
 def _check_view_order(lf, path, metadata) -> None:
     """Record the views' motion (px/view) in ``metadata`` and warn when the view axes look swapped."""
-    from ..epi import _transposed, _view_shifts
+    from ..epi import _measurable, _transposed, _view_shifts
 
-    if min(lf.shape[:2]) < 2 or min(lf.shape[2:4]) < 8:
+    if not _measurable(lf.shape):
         return
     shifts = _view_shifts(lf)
     metadata["view_shifts"] = np.round(shifts, 3).tolist()
