@@ -16,7 +16,8 @@ from napari_lfdeblur.blur import simulate_blur  # noqa: E402
 from napari_lfdeblur.path import bezier_positions  # noqa: E402
 
 SHAPE = (5, 5, 16, 16)
-TIMEOUT = 120_000  # ms: a guard against hangs; the blind run here took 49 s on a slow 2-core machine under xvfb
+TIMEOUT = 120_000  # ms: a guard against hangs (the blind run here took 49 s on a slow 2-core machine before its
+# redraws were spaced by their cost, 5 s after)
 
 
 @pytest.fixture
@@ -395,6 +396,34 @@ def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, not
     assert w.last_result is None
     assert ("info", "Blind deblur: cancelled") in notifications
     assert not [n for n in notifications if n[0] == "error"], notifications
+
+
+def test_blind_live_redraws_are_spaced_by_their_cost(make_napari_viewer, monkeypatch):
+    import time
+
+    from napari_lfdeblur._napari.widgets import blind
+    from napari_lfdeblur._progress import Progress
+
+    viewer = make_napari_viewer()
+    w = blind.BlindDeblurWidget(viewer)
+    w._job = {"source": "b", "shape": SHAPE, "n_times": 16, "true": None}
+    drawn = []
+
+    def slow_plot(*args, **kwargs):  # a redraw that takes 0.1 s
+        drawn.append(kwargs.get("live"))
+        time.sleep(0.1)
+
+    monkeypatch.setattr(w.plot, "plot", slow_plot)
+    record = Progress(stage="path", iteration=1, n_iterations=10, loss=1.0, control_points=np.zeros((2, 3)))
+    w.on_progress(record)
+    assert drawn == [True] and "b path (preview)" in viewer.layers
+    # the next redraw waits for at least REDRAW_SHARE times the cost of this one (over 0.3 s here)
+    assert w._next_draw - time.perf_counter() > blind.REDRAW_SHARE * 0.1 - 0.05 > blind.REDRAW_INTERVAL
+    w.on_progress(record)
+    assert drawn == [True]
+    w._next_draw = 0.0
+    w.on_progress(record)
+    assert drawn == [True, True]
 
 
 def test_blind_unavailable_device_notifies(make_napari_viewer, lf, notifications):

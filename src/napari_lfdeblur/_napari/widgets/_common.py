@@ -273,6 +273,16 @@ def _figure_canvas(width=3.2, height=1.9):
     return fig, canvas
 
 
+def _redraw(figure, canvas, live: bool) -> None:
+    """Draw a plot: now and without laying it out again during a run (``live``; the layout
+    is most of the cost of a redraw), else laid out, when Qt is next idle."""
+    figure.set_layout_engine("none" if live else "constrained")
+    if live:
+        canvas.draw()
+    else:
+        canvas.draw_idle()
+
+
 class PathPlot(QWidget):
     """``p_x``, ``p_y``, ``p_z`` against ``t``: the path (solid) and a true one (dashed)."""
 
@@ -288,8 +298,8 @@ class PathPlot(QWidget):
         self.lines = {}
         self.plot(None)
 
-    def plot(self, control_points, true_control_points=None, n_times: int = 64) -> None:
-        """Redraw; either path may be None."""
+    def plot(self, control_points, true_control_points=None, n_times: int = 64, live: bool = False) -> None:
+        """Redraw; either path may be None. ``live``: a quick redraw during a run."""
         ax = self.ax
         ax.clear()
         t = np.linspace(0, 1, max(2, n_times))
@@ -309,7 +319,7 @@ class PathPlot(QWidget):
         ax.grid(alpha=0.3)
         if ax.lines:
             ax.legend(fontsize=6, ncol=2, loc="best")
-        self.canvas.draw_idle()
+        _redraw(self.figure, self.canvas, live)
 
 
 class LossPlot(QWidget):
@@ -327,8 +337,11 @@ class LossPlot(QWidget):
         self._stage = None
         self.plot([])
 
-    def plot(self, values, stage_starts=None) -> None:
-        """Redraw with ``values`` (and stage boundaries, indices into ``values``)."""
+    def plot(self, values, stage_starts=None, live: bool = False) -> None:
+        """Redraw with ``values`` (and stage boundaries, indices into ``values``).
+
+        ``live``: a quick redraw during a run.
+        """
         self.values = [float(v) for v in values]
         if stage_starts is not None:
             self.stage_starts = list(stage_starts)
@@ -347,7 +360,7 @@ class LossPlot(QWidget):
         ax.set_ylabel("loss", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-        self.canvas.draw_idle()
+        _redraw(self.figure, self.canvas, live)
 
     def reset(self) -> None:
         """Forget all values and stages."""

@@ -7,7 +7,9 @@ napari ``thread_worker``. While it runs:
 - a live preview: the layer ``'<source> path (preview)'`` and the path plot
   show the current path (with the true path, dashed / cyan, when the input
   layer's metadata holds one, e.g. after *Simulate blur*), redrawn at most
-  every 0.3 s; the layer ``'<source> blind (preview)'`` shows the current
+  every 0.3 s, and after a pause of five times what the last redraw took (the
+  redraws run in Qt's thread and hold Python's lock, so that on a slow machine
+  they would otherwise slow the solver down: ``benchmarks/widget_overhead.py``); the layer ``'<source> blind (preview)'`` shows the current
   light-field estimate whenever the solver sends one (every *preview every*
   reports: the salient-edge latent during path estimation, then the
   estimate of the final non-blind stage);
@@ -53,8 +55,12 @@ from ._common import (
 
 __all__ = ["BlindDeblurWidget"]
 
-#: seconds between redraws of the plots during a run
+#: least seconds between two redraws of the plots and the path preview during a run
 REDRAW_INTERVAL = 0.3
+#: a redraw that took ``c`` seconds is followed by at least ``REDRAW_SHARE * c`` seconds without
+#: one, so that redraws (Qt's thread, holding Python's lock) leave the solver most of the time
+#: on a slow machine
+REDRAW_SHARE = 5.0
 
 
 def _presets() -> list[str]:
@@ -126,7 +132,7 @@ class BlindDeblurWidget(SolverWidget):
         self.preset_combo.currentTextChanged.connect(self._preset_changed)
         self._preset_changed()
         self._input_changed()
-        self._last_draw = 0.0
+        self._next_draw = 0.0
         self.preview_updates = 0
         self.path_preview_updates = 0
 
@@ -203,7 +209,7 @@ class BlindDeblurWidget(SolverWidget):
         }
         self.loss_plot.reset()
         self.plot.plot(None, self._job["true"])
-        self._last_draw = 0.0
+        self._next_draw = 0.0
         self.preview_updates = 0
         self.path_preview_updates = 0
         return lambda: gen
@@ -217,17 +223,18 @@ class BlindDeblurWidget(SolverWidget):
                                          metadata=lightfield_metadata(kind="preview"), opacity=1.0)
             add_layer(self.viewer, data)
             self.preview_updates += 1
-        now = time.perf_counter()
-        if now - self._last_draw > REDRAW_INTERVAL or progress.preview is not None:
-            self._last_draw = now
-            self.loss_plot.plot(self.loss_plot.values)
+        start = time.perf_counter()
+        if start >= self._next_draw:
+            self.loss_plot.plot(self.loss_plot.values, live=True)
             if progress.control_points is not None:
-                self.plot.plot(progress.control_points, self._job["true"])
+                self.plot.plot(progress.control_points, self._job["true"], live=True)
                 add_layer(self.viewer, path_layer_data(
                     progress.control_points, self._job["shape"], n_times=self._job["n_times"],
                     name=self.path_preview_name(), true_control_points=self._job["true"],
                     metadata={"kind": "path preview"}))
                 self.path_preview_updates += 1
+            end = time.perf_counter()
+            self._next_draw = end + max(REDRAW_INTERVAL, REDRAW_SHARE * (end - start))
 
     def cleanup(self) -> None:
         if getattr(self, "_job", None):
