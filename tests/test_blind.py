@@ -325,6 +325,10 @@ def test_bad_input_gives_clear_errors():
         BlindParams(fit_robust=-0.1)
     with pytest.raises(ValueError, match="edge_sigma"):
         BlindParams(edge_sigma=float("nan"))
+    with pytest.raises(ValueError, match="edge_anisotropy"):
+        BlindParams(edge_anisotropy=float("inf"))
+    with pytest.raises(ValueError, match="edge_anisotropy"):
+        BlindParams(edge_anisotropy="wide")
     with pytest.raises(ValueError, match="edge_sigma_from"):
         BlindParams(edge_sigma_from=0)
     with pytest.raises(ValueError, match="disparity_weight"):
@@ -683,9 +687,33 @@ def test_edge_model_starts_at_edge_sigma_from_and_runs_two_alternations_before_s
         return max(r.info["alternation"] for r in gen if r.info.get("phase") == "done")
 
     # never still: all 6 alternations, the edge model in alternations 3..6 only
-    assert alternations(n_outer=6, path_tol=0.0) == 6 and built == [0.5] * 4
+    assert alternations(n_outer=6, path_tol=0.0) == 6 and built == [(0.5, 0.5)] * 4
     # always still: moves count as still only after alternation 3, so the level stops after 5
     # (two still alternations after the switch), the edge model having run in 3, 4 and 5
-    assert alternations(n_outer=9, path_tol=1e9) == 5 and built == [0.5] * 3
+    assert alternations(n_outer=9, path_tol=1e9) == 5 and built == [(0.5, 0.5)] * 3
     # edge_sigma = 0: no edge model at all
     assert alternations(n_outer=4, path_tol=0.0, edge_sigma=0.0) == 4 and built == []
+    # edge_anisotropy splits the same mean square width between the axes, x the softer
+    assert alternations(n_outer=4, path_tol=0.0, edge_anisotropy=0.6) == 4 and len(built) == 2
+    sy, sx = built[0]
+    assert (sy**2 + sx**2) / 2 == pytest.approx(0.25) and sx**2 - sy**2 == pytest.approx(0.36)
+
+
+def test_anisotropic_edge_gaussian_has_the_widths_asked_and_is_self_adjoint():
+    shape = (2, 2, 41, 41, 1)
+    delta = torch.zeros(shape, dtype=torch.float64)
+    delta[:, :, 20, 20] = 1.0
+    g = blind._gauss_yx(delta, (1.0, 2.0))[0, 0, :, :, 0].numpy()
+    r = np.arange(41) - 20.0
+    assert g.sum() == pytest.approx(1.0)
+    # second moments of the kernel along y and x (sampled at whole pixels and cut at 3 sigma,
+    # so a little below sigma^2)
+    assert (g.sum(axis=1) * r**2).sum() == pytest.approx(1.0, rel=0.05)
+    assert (g.sum(axis=0) * r**2).sum() == pytest.approx(4.0, rel=0.05)
+    # one axis without blur leaves it untouched; a single sigma is the same on both axes
+    only_x = blind._gauss_yx(delta, (0.0, 1.1))[0, 0, :, :, 0].numpy()
+    assert np.count_nonzero(only_x.sum(axis=1)) == 1
+    np.testing.assert_array_equal(blind._gauss_yx(delta, 0.7), blind._gauss_yx(delta, (0.7, 0.7)))
+    x, y = torch.rand(shape, dtype=torch.float64), torch.rand(shape, dtype=torch.float64)
+    lhs = float((blind._gauss_yx(x, (0.4, 1.1)) * y).sum())
+    assert lhs == pytest.approx(float((x * blind._gauss_yx(y, (0.4, 1.1))).sum()), rel=1e-12)

@@ -166,6 +166,18 @@ class BlindParams(JsonParams):
         spatial Gaussian of this many pixels, applied inside the model, so
         that the path need not absorb the edge profile (0: off). Without it
         the path comes out inflated (docs/blind.md).
+    edge_anisotropy : float
+        How much softer the scene's edges are along ``x`` than along ``y``,
+        in px: the Gaussian along ``y`` that would make them equally soft
+        (negative: softer along ``y``). The edge model keeps its mean square
+        width ``edge_sigma**2`` and splits it between the axes,
+        ``sigma_x**2 = edge_sigma**2 + a |a| / 2`` and ``sigma_y**2 =
+        edge_sigma**2 - a |a| / 2`` (at least 0). A property of the camera,
+        not of the motion: views decoded from a first-generation Lytro
+        capture are softer along ``x`` by about 0.6 px
+        (``benchmarks/scene_anisotropy.py``), and with the isotropic default
+        the path estimate absorbs the difference (docs/blind.md, "The Lytro
+        views are softer along x"). 0: isotropic.
     edge_sigma_from : int
         The edge model is used from this alternation of the first level on
         (1: from the start). Used from the start it lets the Gaussian
@@ -245,6 +257,7 @@ class BlindParams(JsonParams):
     n_random_later: int = 200
     fit_robust: float = 0.3
     edge_sigma: float = 0.5
+    edge_anisotropy: float = 0.0
     edge_sigma_from: int = 4
     disparity_weight: float = 4.0
     n_perturb: int = 4
@@ -301,6 +314,13 @@ class BlindParams(JsonParams):
                 kind = "> 0" if name in positive else ">= 0"
                 raise ValueError(f"BlindParams.{name} must be finite and {kind}; got {v!r}")
             object.__setattr__(self, name, v)
+        try:
+            a = float(self.edge_anisotropy)
+        except (TypeError, ValueError):
+            a = math.nan
+        if isinstance(self.edge_anisotropy, bool) or not math.isfinite(a):
+            raise ValueError(f"BlindParams.edge_anisotropy must be a finite number; got {self.edge_anisotropy!r}")
+        object.__setattr__(self, "edge_anisotropy", a)
         object.__setattr__(self, "estimate_z", bool(self.estimate_z))
         object.__setattr__(self, "try_mirror", bool(self.try_mirror))
         if self.hqs_kappa <= 1:
@@ -806,16 +826,28 @@ def _l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: BlindParams, x0
     return x
 
 
-def _gauss_yx(L: torch.Tensor, sigma: float) -> torch.Tensor:
-    """Spatial Gaussian blur of (V, U, Y, X, C), zero padded (so the operator is self-adjoint)."""
-    if sigma <= 0:
-        return L
-    r = max(1, int(math.ceil(3 * sigma)))
-    t = torch.arange(-r, r + 1, dtype=L.dtype, device=L.device)
-    k = torch.exp(-0.5 * (t / sigma) ** 2)
-    k = k / k.sum()
+def _edge_sigmas(p: BlindParams) -> tuple[float, float]:
+    """``(sigma_y, sigma_x)`` of the edge model: ``edge_sigma`` split by ``edge_anisotropy``."""
+    half = p.edge_anisotropy * abs(p.edge_anisotropy) / 2.0
+    s2 = p.edge_sigma**2
+    return math.sqrt(max(s2 - half, 0.0)), math.sqrt(max(s2 + half, 0.0))
+
+
+def _gauss_yx(L: torch.Tensor, sigma) -> torch.Tensor:
+    """Spatial Gaussian blur of (V, U, Y, X, C), zero padded (so the operator is self-adjoint).
+
+    ``sigma``: px, one for both axes or ``(sigma_y, sigma_x)``.
+    """
+    sigmas = (sigma, sigma) if np.isscalar(sigma) else tuple(sigma)
     # separable, by shifted adds (conv2d on these shapes is about 15x slower on the CPU)
-    for dim in (2, 3):
+    for dim, sd in zip((2, 3), sigmas):
+        if sd <= 0:
+            continue
+        # the taps of epi.gaussian_taps, computed in L's precision
+        r = max(1, int(math.ceil(3 * sd)))
+        t = torch.arange(-r, r + 1, dtype=L.dtype, device=L.device)
+        k = torch.exp(-0.5 * (t / sd) ** 2)
+        k = k / k.sum()
         n = L.shape[dim]
         out = L * k[r]
         for j in range(1, min(r, n - 1) + 1):
@@ -913,7 +945,7 @@ class _GramLoss:
         self.scale = 1.0 / max(1, self.F.numel())
 
     @torch.no_grad()
-    def set_latent(self, latent, cp=None, robust: float = 0.0, sigma: float = 0.0):
+    def set_latent(self, latent, cp=None, robust: float = 0.0, sigma=0.0):
         gy, gx = _grad_yx(_gauss_yx(latent, sigma))
         Lg = torch.stack([gy[:, :, self.ys, self.xs, 0], gx[:, :, self.ys, self.xs, 0]], dim=0)  # (2, V, U, M)
         nO, M = self.nO, self.ys.shape[0]
@@ -1103,11 +1135,11 @@ def _iter_alternating(g, d_inf, p: BlindParams, device, rng, n_cp, box, history,
         still = 0
         es_from = p.edge_sigma_from if stage == 0 else 1  # the edge model from this alternation on
         for outer in range(1, n_outer + 1):
-            sigma = p.edge_sigma if outer >= es_from else 0.0
+            sigma = _edge_sigmas(p) if outer >= es_from else (0.0, 0.0)
             base = (outer - 1) * per_outer
             tick = 0
             op = BlurOperator(shape, cur, n_times=T, infinity_disparity=d_lvl, device=device)
-            if sigma > 0:
+            if max(sigma) > 0:
                 op = _EdgeBlurred(op, sigma)
             gen, x = _l0_latent(op, f, lam, p, latent), None
             while True:
