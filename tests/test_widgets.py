@@ -345,6 +345,7 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     w.tv_iter_spin.setValue(3)
     w.device_combo.setCurrentText("cpu")
     w.preview_spin.setValue(1)
+    w.anisotropy_spin.setValue(0.3)
     w.run()
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
@@ -372,6 +373,7 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     assert len(meta["loss_history"]) >= 2
     assert w.preview_updates >= 1 and w.path_preview_updates >= 1  # live previews were shown (then removed)
     assert meta["parameters"]["n_control_points"] == 3 and meta["parameters"]["tv_iter"] == 3
+    assert meta["parameters"]["edge_anisotropy"] == pytest.approx(0.3)
     np.testing.assert_array_equal(layer.data, before)
 
 

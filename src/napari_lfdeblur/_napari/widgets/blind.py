@@ -74,14 +74,15 @@ def _iteration_field(params) -> str:
     return "n_iter" if params.method == "joint" else "n_outer"
 
 
-def _make_params(preset: str, *, n_points: int, n_iter: int, tv_iter: int, preview_every: int):
+def _make_params(preset: str, *, n_points: int, n_iter: int, tv_iter: int, preview_every: int,
+                 edge_anisotropy: float = 0.0):
     """``BlindParams`` of a preset with the widget's values."""
     from ...blind import BlindParams
 
     params = BlindParams.preset(preset)
     return params.replace(
         n_control_points=n_points, tv_iter=tv_iter, preview_every=preview_every,
-        **{_iteration_field(params): n_iter},
+        edge_anisotropy=edge_anisotropy, **{_iteration_field(params): n_iter},
     )
 
 
@@ -103,6 +104,9 @@ class BlindDeblurWidget(SolverWidget):
         self.device_combo = device_combo()
         self.seed_spin = spin(0, 0, 2**31 - 1, "random seed of the initial path")
         self.d_inf_spin = dspin(0.0, -20.0, 20.0, 0.1, 3, "infinity disparity d_inf, px/view")
+        self.anisotropy_spin = dspin(0.0, -2.0, 2.0, 0.05, 2, "how much softer the camera's views are "
+                                     "along x than along y, px (BlindParams.edge_anisotropy; views "
+                                     "decoded from a first-generation Lytro: about 0.6; 0: the same)")
         self.preview_spin = spin(10, 0, 1000, "preview the light field every N iterations of the "
                                  "final solve (0: none); the path is previewed at every iteration")
         self.true_combo = LayerComboBox(napari_viewer, predicate=has_path, allow_none=True)
@@ -114,6 +118,7 @@ class BlindDeblurWidget(SolverWidget):
         self.form.addRow("device", self.device_combo)
         self.form.addRow("seed", self.seed_spin)
         self.form.addRow("infinity disparity", self.d_inf_spin)
+        self.form.addRow("views softer along x (px)", self.anisotropy_spin)
         self.form.addRow("preview every", self.preview_spin)
         self.form.addRow("true path (optional)", self.true_combo)
 
@@ -148,6 +153,7 @@ class BlindDeblurWidget(SolverWidget):
         self.iter_spin.setValue(getattr(p, _iteration_field(p)))
         self.tv_iter_spin.setValue(p.tv_iter)
         self.preview_spin.setValue(p.preview_every)
+        self.anisotropy_spin.setValue(p.edge_anisotropy)
 
     def _input_changed(self, *_):
         layer = self.layer_combo.current_layer()
@@ -194,6 +200,7 @@ class BlindDeblurWidget(SolverWidget):
             n_iter=self.iter_spin.value(),
             tv_iter=self.tv_iter_spin.value(),
             preview_every=self.preview_spin.value(),
+            edge_anisotropy=self.anisotropy_spin.value(),
         )
         device = self.device_combo.currentText()
         d_inf = self.d_inf_spin.value()
