@@ -96,6 +96,10 @@ PATHS = {
     # fresh: added in the fourth session before any run on them, never used to choose settings
     "p8": (4, 2.5, 0.0, 108),
     "p9": (4, 2.0, 0.4, 109),
+    # fresh in the sixth session: added before any run on them, to check `default` and `camera`
+    # on cases no setting was chosen on
+    "p10": (4, 2.5, 0.0, 110),
+    "p11": (4, 2.0, 0.4, 111),
 }
 
 #: cases used while developing the solver, in the order they were added: development cases;
@@ -108,6 +112,7 @@ DEV_CASES = [f"{s}-{p}" for s in ("syn", "lytro") for p in ("p1", "p2", "p3")]
 HELD_OUT_CASES = [f"{s}-{p}" for s in ("syn2", "lytro2") for p in ("p4", "p5")]
 SEEN_CASES = [f"{s}-{p}" for s in ("syn3", "lytro3") for p in ("p6", "p7")]
 FRESH_CASES = [f"{s}-{p}" for s in ("syn4", "lytro4") for p in ("p8", "p9")]
+FRESH6_CASES = [f"{s}-{p}" for s in ("syn5", "lytro5") for p in ("p10", "p11")]
 #: the full Lytro capture the ``lytro2`` crop comes from (beside the repository; the environment
 #: variable LFDEBLUR_LYTRO_CAPTURE overrides)
 LYTRO_CAPTURE = Path(os.environ.get("LFDEBLUR_LYTRO_CAPTURE", ROOT.parent / "shared" / "data" / "lytro-f01-img0001"))
@@ -156,18 +161,20 @@ def _scene(name: str, quick: bool):
     if name == "syn2":
         lf, _ = synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=2)
         return lf
-    if name in ("syn3", "syn4"):
+    if name in ("syn3", "syn4", "syn5"):
         lf, _ = synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=int(name[-1]))
         return lf
-    if name in ("lytro2", "lytro3", "lytro4"):
+    if name in ("lytro2", "lytro3", "lytro4", "lytro5"):
         from napari_lfdeblur import read_lightfield
 
         # lytro2: the top-left 128 x 128 pixels of the capture (the `lytro` crop is pixels 64..191);
-        # lytro3: the bottom-right ones; lytro4: the top-right ones; same views. The capture's file
+        # lytro3: the bottom-right ones; lytro4: the top-right ones; lytro5: the bottom-left ones;
+        # same views. The capture's file
         # names give the horizontal view index first (read as named, u would move the image along y)
         lf = read_lightfield(LYTRO_CAPTURE, pattern=LYTRO_PATTERN)
         win = {"lytro2": (slice(None, 128), slice(None, 128)), "lytro3": (slice(-128, None), slice(-128, None)),
-               "lytro4": (slice(None, 128), slice(-128, None))}[name]
+               "lytro4": (slice(None, 128), slice(-128, None)),
+               "lytro5": (slice(-128, None), slice(None, 128))}[name]
         return np.ascontiguousarray(lf[1:10, 1:10, win[0], win[1]], dtype=np.float32)
     raise ValueError(f"unknown scene {name!r}")
 
@@ -192,7 +199,7 @@ def case_names(quick: bool) -> list[str]:
     if quick:
         return ["syn-p2"]
     names = list(DEV_CASES)
-    for c in HELD_OUT_CASES + SEEN_CASES + FRESH_CASES:
+    for c in HELD_OUT_CASES + SEEN_CASES + FRESH_CASES + FRESH6_CASES:
         if LYTRO_CAPTURE.is_dir() or not c.startswith("lytro"):  # the capture is beside the repository
             names.append(c)
     return names
@@ -410,7 +417,8 @@ def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
     groups = [("", lambda c: True)]
     if any(r["case"] not in DEV_CASES for r in rows):
         groups += [(" dev", lambda c: c in DEV_CASES), (" held-out", lambda c: c in HELD_OUT_CASES),
-                   (" fresh in session 3", lambda c: c in SEEN_CASES), (" fresh", lambda c: c in FRESH_CASES)]
+                   (" fresh in session 3", lambda c: c in SEEN_CASES), (" fresh", lambda c: c in FRESH_CASES),
+                   (" fresh in session 6", lambda c: c in FRESH6_CASES)]
     for (label, keep), method in ((g, m) for g in groups for m in ["input (blurred)", *methods]):
         sel = [r for r in rows if r["method"] == method and "error" not in r and "skipped" not in r and keep(r["case"])]
         if not sel:
@@ -506,7 +514,11 @@ METHOD_TEXT = """\
 - **Fresh cases**, added in the fourth session before any run on them, and run only for this
   report: `syn4` (`seed=4`) and `lytro4`, the top-right 128×128 pixels of the capture (a quarter
   overlaps the `lytro` crop), views 2..10, each blurred by `p8` (`seed=108`, 2.5 views, in-plane)
-  and `p9` (`seed=109`, 2 views, with z). The summary gives the means over all cases and over each
+  and `p9` (`seed=109`, 2 views, with z).
+- **Fresh in session 6**, added in the sixth session before any run on them: `syn5` (`seed=5`)
+  and `lytro5`, the bottom-left 128×128 pixels of the capture (a quarter overlaps the `lytro`
+  crop), views 2..10, each blurred by `p10` (`seed=110`, 2.5 views, in-plane) and `p11`
+  (`seed=111`, 2 views, with z). The summary gives the means over all cases and over each
   group.
 - **Ground truth.** The true path is moved to the zero-mean gauge for T = 128, so the ground-truth
   light field is the sharp one seen from the mean camera position (MODEL.md, "Gauge of results").

@@ -118,7 +118,7 @@ def test_summary_gives_held_out_means_apart(blind_eval):
     assert means["fresh in session 3"]["gain"] == pytest.approx(1.0)
     assert means["fresh"]["gain"] == pytest.approx(0.0) and means["fresh"]["case"] == "**mean of 1 fresh**"
     groups = [set(blind_eval.DEV_CASES), set(blind_eval.HELD_OUT_CASES), set(blind_eval.SEEN_CASES),
-              set(blind_eval.FRESH_CASES)]
+              set(blind_eval.FRESH_CASES), set(blind_eval.FRESH6_CASES)]
     assert sum(len(g) for g in groups) == len(set.union(*groups))  # disjoint
 
 
