@@ -843,7 +843,6 @@ def _gauss_yx(L: torch.Tensor, sigma) -> torch.Tensor:
     for dim, sd in zip((2, 3), sigmas):
         if sd <= 0:
             continue
-        # the taps of epi.gaussian_taps, computed in L's precision
         r = max(1, int(math.ceil(3 * sd)))
         t = torch.arange(-r, r + 1, dtype=L.dtype, device=L.device)
         k = torch.exp(-0.5 * (t / sd) ** 2)
@@ -859,7 +858,8 @@ def _gauss_yx(L: torch.Tensor, sigma) -> torch.Tensor:
 
 class _EdgeBlurred:
     """``K_p G_sigma``: the blur of a latent whose edges are sharper than the scene's by a
-    spatial Gaussian of ``sigma`` px (which commutes with the angular blur of an in-plane path)."""
+    spatial Gaussian of ``sigma`` px, or ``(sigma_y, sigma_x)`` (which commutes with the angular
+    blur of an in-plane path)."""
 
     def __init__(self, op, sigma):
         self.op, self.sigma = op, sigma

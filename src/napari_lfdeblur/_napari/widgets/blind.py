@@ -9,10 +9,11 @@ napari ``thread_worker``. While it runs:
   layer's metadata holds one, e.g. after *Simulate blur*), redrawn at most
   every 0.3 s, and after a pause of five times what the last redraw took (the
   redraws run in Qt's thread and hold Python's lock, so that on a slow machine
-  they would otherwise slow the solver down: ``benchmarks/widget_overhead.py``); the layer ``'<source> blind (preview)'`` shows the current
-  light-field estimate whenever the solver sends one (every *preview every*
-  reports: the salient-edge latent during path estimation, then the
-  estimate of the final non-blind stage);
+  they would otherwise slow the solver down: ``benchmarks/widget_overhead.py``);
+  the layer ``'<source> blind (preview)'`` shows the current light-field
+  estimate whenever the solver sends one (every *preview every* reports: the
+  salient-edge latent during path estimation, then the estimate of the final
+  non-blind stage);
 - the loss curve.
 
 Cancel stops the solver at its next progress report, which comes after
