@@ -606,7 +606,7 @@ def test_out_of_memory_mid_run_falls_back_and_releases(monkeypatch):
 # ------------------------------------------------------------ CLI
 
 
-def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys):
+def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys, monkeypatch):
     from napari_lfdeblur.cli import main
     from napari_lfdeblur.path import load_path_json
 
@@ -626,6 +626,21 @@ def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
     assert main(["deblur", str(tmp_path / "missing.npz"), str(tmp_path / "o.npz")]) == 2
     assert main(["deblur", str(src), str(tmp_path / "o2.npz"), "--preset", "nope"]) == 2
+    # --edge-anisotropy overrides the parameter file's value and nothing else
+    seen = []
+    real = blind.iter_blind_deblur
+
+    def spy(*args, params=None, **kwargs):
+        seen.append(params)
+        return real(*args, params=params, **kwargs)
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", spy)
+    out3 = tmp_path / "sharp3.npz"
+    assert main(["deblur", str(src), str(out3), "--params", str(params), "--edge-anisotropy", "0.6",
+                 "--device", "cpu"]) == 0
+    assert seen[-1] == BlindParams.from_json(params.read_text()).replace(edge_anisotropy=0.6)
+    assert main(["deblur", str(src), str(tmp_path / "o4.npz"), "--edge-anisotropy", "nan"]) == 2
+    assert "edge_anisotropy" in capsys.readouterr().err
 
 
 def test_solvers_never_leave_the_caller_without_grad(linear_case):

@@ -140,6 +140,9 @@ def _add_deblur(sub):
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--edge-anisotropy", type=float, metavar="PX",
+                   help="how much softer the camera's views are along x than along y, px "
+                        "(BlindParams.edge_anisotropy; first-generation Lytro: about 0.6; default: the preset's, 0)")
     p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
 
@@ -160,6 +163,8 @@ def _run_deblur(args):
         params = BlindParams.from_json(Path(args.params).read_text())
     else:
         params = BlindParams.preset(args.preset)
+    if args.edge_anisotropy is not None:
+        params = params.replace(edge_anisotropy=args.edge_anisotropy)
     lf, _ = _read(args)
     gen = iter_blind_deblur(lf, infinity_disparity=args.infinity_disparity, params=params,
                             device=args.device, seed=args.seed)
