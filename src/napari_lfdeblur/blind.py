@@ -302,7 +302,8 @@ class BlindParams(JsonParams):
         nonneg = ("max_extent", "z_box", "latent_angular_weight", "perturb", "init_length", "fit_robust", "edge_sigma", "disparity_weight", "l0_weight", "l0_floor", "path_tol", "prior_weight",
                   "prior_floor", "tv_weight", "eps_min")
         positive = ("hqs_beta_max", "path_lr", "lf_lr", "eps", "l0_decay", "prior_decay", "eps_decay")
-        for name in nonneg + positive:
+        signed = ("edge_anisotropy",)
+        for name in nonneg + positive + signed:
             v = getattr(self, name)
             if isinstance(v, bool):
                 raise ValueError(f"BlindParams.{name} must be a number; got {v!r}")
@@ -310,17 +311,10 @@ class BlindParams(JsonParams):
                 v = float(v)
             except (TypeError, ValueError):
                 raise ValueError(f"BlindParams.{name} must be a number; got {v!r}") from None
-            if not math.isfinite(v) or v < 0 or (name in positive and v == 0):
-                kind = "> 0" if name in positive else ">= 0"
+            if not math.isfinite(v) or (name not in signed and v < 0) or (name in positive and v == 0):
+                kind = "> 0" if name in positive else ">= 0" if name in nonneg else "a number"
                 raise ValueError(f"BlindParams.{name} must be finite and {kind}; got {v!r}")
             object.__setattr__(self, name, v)
-        try:
-            a = float(self.edge_anisotropy)
-        except (TypeError, ValueError):
-            a = math.nan
-        if isinstance(self.edge_anisotropy, bool) or not math.isfinite(a):
-            raise ValueError(f"BlindParams.edge_anisotropy must be a finite number; got {self.edge_anisotropy!r}")
-        object.__setattr__(self, "edge_anisotropy", a)
         object.__setattr__(self, "estimate_z", bool(self.estimate_z))
         object.__setattr__(self, "try_mirror", bool(self.try_mirror))
         if self.hqs_kappa <= 1:
