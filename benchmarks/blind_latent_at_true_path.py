@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from blind_dev import _eval_module  # benchmarks/ is on the path when this script runs
 
-from napari_lfdeblur._progress import run_to_completion
+from napari_lfdeblur.progress import run_to_completion
 
 
 def main(argv=None):

@@ -404,7 +404,7 @@ def test_blind_live_redraws_are_spaced_by_their_cost(make_napari_viewer, monkeyp
     import time
 
     from napari_lfdeblur._napari.widgets import blind
-    from napari_lfdeblur._progress import Progress
+    from napari_lfdeblur.progress import Progress
 
     viewer = make_napari_viewer()
     w = blind.BlindDeblurWidget(viewer)

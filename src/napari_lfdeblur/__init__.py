@@ -63,6 +63,10 @@ _PUBLIC = {
     "angular_error": "metrics",
     # devices
     "select_device": "devices",
+    # solver progress records
+    "Progress": "progress",
+    "run_to_completion": "progress",
+    "with_previews": "progress",
 }
 
 __all__ = ["__version__", *_PUBLIC]

@@ -66,7 +66,7 @@ import numpy as np
 import torch
 
 from ._params import JsonParams
-from ._progress import Progress, run_to_completion
+from .progress import Progress, run_to_completion
 from .blur import BlurOperator, _lerp_taps, validate_lightfield
 from .devices import select_device
 from .path import bernstein_matrix, bezier_positions, center_path
@@ -1493,7 +1493,7 @@ def blind_deblur(
     n_control_points : int, optional
         Control points of the estimated path (default ``params.n_control_points``).
     callback : callable, optional
-        Called with each :class:`~napari_lfdeblur._progress.Progress` record.
+        Called with each :class:`~napari_lfdeblur.progress.Progress` record.
 
     Returns
     -------

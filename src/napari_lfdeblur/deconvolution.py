@@ -37,7 +37,7 @@ import numpy as np
 import torch
 
 from ._params import JsonParams
-from ._progress import Progress, run_to_completion
+from .progress import Progress, run_to_completion
 from .blur import BlurOperator, from_tensor, interpolation_matrices, to_tensor, validate_frame, validate_lightfield
 from .devices import select_device
 from .path import bezier_positions, validate_control_points, validate_n_times
@@ -345,7 +345,7 @@ def iter_deconvolve(
     """Deconvolve a light field blurred by a known path, as a generator.
 
     Takes the arguments of :func:`deconvolve`. Yields
-    :class:`~napari_lfdeblur._progress.Progress` records and *returns* the
+    :class:`~napari_lfdeblur.progress.Progress` records and *returns* the
     result (``StopIteration.value``); closing the generator stops the work at
     the next ``yield``. Arguments are checked when the generator is created.
 
@@ -415,7 +415,7 @@ def deconvolve(
         of a larger light field (for tiled processing): ``p_z``'s shifts are
         then those of the full frame (see :class:`~napari_lfdeblur.blur.BlurOperator`).
     callback : callable, optional
-        Called with each :class:`~napari_lfdeblur._progress.Progress` record.
+        Called with each :class:`~napari_lfdeblur.progress.Progress` record.
 
     Returns
     -------

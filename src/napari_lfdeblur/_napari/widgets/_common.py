@@ -414,7 +414,7 @@ class ProgressPanel(QWidget):
         self.label.setText(text)
 
     def update_progress(self, progress) -> None:
-        """Show a :class:`napari_lfdeblur._progress.Progress` record."""
+        """Show a :class:`napari_lfdeblur.progress.Progress` record."""
         frac = float(getattr(progress, "fraction", 0.0))
         self.bar.setValue(int(round(1000 * frac)))
         elapsed = time.perf_counter() - (self._t0 or time.perf_counter())

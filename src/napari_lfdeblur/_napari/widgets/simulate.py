@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from qtpy.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QPushButton
 
-from ..._progress import Progress
+from ...progress import Progress
 from ...path import preset_path, random_path
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata, path_layer_data
 from ._common import (

@@ -1,0 +1,131 @@
+"""The progress record every iterative solver yields.
+
+Solvers are generators (``iter_deconvolve``, ``iter_blind_deblur``): they
+yield :class:`Progress` records and *return* their result, so a script gets
+it from ``StopIteration.value`` (or simply calls the non-generator form), and
+napari's ``thread_worker`` emits it through its ``returned`` signal. Closing
+the generator (``gen.close()``, or quitting the worker) stops the work at the
+next ``yield``.
+
+How often a caller materialises the current light-field estimate is the
+caller's choice, not the solver's: a record carries a cheap ``estimate``
+callable, and :func:`with_previews` turns it into a ``preview`` array every
+so many records (in the thread that runs the solver).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+__all__ = ["Progress", "run_to_completion", "with_previews"]
+
+
+@dataclass
+class Progress:
+    """One progress report of an iterative solver.
+
+    Attributes
+    ----------
+    stage : str
+        Name of the current stage (e.g. ``'path'``, ``'tv'``, ``'wiener'``).
+    iteration : int
+        Iterations done in this stage (1-based).
+    n_iterations : int
+        Iterations planned for this stage (an upper bound with early stopping).
+    loss : float
+        Current objective value (NaN when the stage has none).
+    control_points : ndarray or None, shape (n, 3)
+        Current path estimate, when the solver estimates one.
+    preview : ndarray or None
+        A current light-field estimate, (V, U, Y, X[, C]) float32, when the
+        caller asked for one (see :func:`with_previews`).
+    estimate : callable or None
+        ``estimate()`` returns the current light-field estimate,
+        (V, U, Y, X[, C]) float32 (a new array). It is valid only until the
+        generator is resumed, so call it before asking for the next record.
+    stage_index, n_stages : int
+        Position of this stage among all stages (0-based) and their count,
+        for an overall progress bar.
+    info : dict
+        Anything else worth showing (step sizes, epsilon, ...).
+    """
+
+    stage: str
+    iteration: int
+    n_iterations: int
+    loss: float = float("nan")
+    control_points: np.ndarray | None = None
+    preview: np.ndarray | None = None
+    estimate: Callable[[], np.ndarray] | None = field(default=None, repr=False)
+    stage_index: int = 0
+    n_stages: int = 1
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def fraction(self) -> float:
+        """Overall fraction done, in [0, 1]."""
+        within = self.iteration / max(1, self.n_iterations)
+        return min(1.0, (self.stage_index + min(1.0, within)) / max(1, self.n_stages))
+
+
+def run_to_completion(gen, callback=None):
+    """Drive a solver generator to its end and return its result.
+
+    ``callback(progress)`` is called on every record when given.
+    """
+    while True:
+        try:
+            record = next(gen)
+        except StopIteration as stop:
+            return stop.value
+        if callback is not None:
+            callback(record)
+
+
+def with_previews(gen, every: int):
+    """Wrap a solver generator so that every ``every``-th record carries a preview.
+
+    The wrapper calls ``record.estimate()`` on the 1st, ``every+1``-th, ...
+    record that has one, and on the last record of the run, and stores the
+    array in ``record.preview``; other records pass through unchanged. It
+    returns the wrapped generator's result, and closing it closes ``gen``.
+
+    Parameters
+    ----------
+    gen : generator of Progress
+        A solver generator such as ``iter_deconvolve(...)``.
+    every : int
+        Records between previews (>= 0; 0: never).
+
+    Raises
+    ------
+    ValueError
+        If ``every`` is negative.
+    TypeError
+        If ``every`` is not an integer.
+    """
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)):
+        raise TypeError(f"every must be an integer; got {type(every).__name__}")
+    if every < 0:
+        raise ValueError(f"every must be >= 0; got {every}")
+    return _with_previews(gen, int(every))
+
+
+def _with_previews(gen, every):
+    count = 0
+    try:
+        while True:
+            try:
+                record = next(gen)
+            except StopIteration as stop:
+                return stop.value
+            if every and record.estimate is not None and record.preview is None:
+                if count % every == 0:
+                    record.preview = record.estimate()
+                count += 1
+            yield record
+    finally:
+        gen.close()
