@@ -43,7 +43,7 @@ import numpy as np
 from skimage import restoration
 
 from napari_lfdeblur import deconvolve, linear_path, lytro_sample, refocus, simulate_blur, synthetic_scene
-from napari_lfdeblur.deconvolution import inplane_psf
+from napari_lfdeblur.special_cases import inplane_psf
 
 ROOT = Path(__file__).resolve().parents[1]
 LENGTHS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)

@@ -18,7 +18,8 @@ from napari_lfdeblur import (
     simulate_blur,
     synthetic_scene,
 )
-from napari_lfdeblur.deconvolution import inplane_matrix, inplane_psf
+from napari_lfdeblur.progress import run_to_completion, with_previews
+from napari_lfdeblur.special_cases import inplane_matrix, inplane_psf
 
 
 def rmse(a, b, mask=None):
@@ -97,16 +98,34 @@ def test_tv_colour_and_early_stopping_and_progress():
     cp = linear_path(1.5, 30, z=1.0)
     blurred = simulate_blur(lf, cp, n_times=8)
     records = []
-    out = deconvolve(blurred, cp, n_times=8, n_iter=400, tol=1e-3, preview_every=2, callback=records.append)
+    gen = with_previews(iter_deconvolve(blurred, cp, n_times=8, n_iter=400, tol=1e-3), 2)
+    out = run_to_completion(gen, records.append)
     assert out.shape == lf.shape and out.dtype == np.float32
     assert 3 <= len(records) < 400  # stopped early on the relative change
     assert records[-1].info["relative_change"] < 1e-3
     assert all(r.stage == "tv" and r.n_iterations == 400 for r in records)
     assert [r.iteration for r in records] == list(range(1, len(records) + 1))
     assert records[1].preview is not None and records[1].preview.shape == lf.shape
+    assert records[0].preview is None and records[2].preview is None
     assert np.isfinite([r.loss for r in records]).all()
     assert records[-1].loss <= records[0].loss
     assert rmse(out, lf) < rmse(blurred, lf)
+
+
+def test_previews_are_the_estimate_of_their_iteration():
+    lf = np.random.default_rng(6).random((3, 3, 8, 8)).astype(np.float32)
+    cp = linear_path(1.0, z=1.0)
+    blurred = simulate_blur(lf, cp, n_times=4)
+    records = []
+    run_to_completion(with_previews(iter_deconvolve(blurred, cp, n_times=4, n_iter=5, tol=0.0), 3), records.append)
+    assert [r.preview is not None for r in records] == [False, False, True, False, False]
+    # the preview of iteration 3 is what a 3-iteration run returns
+    three = deconvolve(blurred, cp, n_times=4, n_iter=3, tol=0.0)
+    np.testing.assert_array_equal(records[2].preview, three)
+    with pytest.raises(ValueError, match="every"):
+        with_previews(iter_deconvolve(blurred, cp, n_times=4), -1)
+    with pytest.raises(TypeError, match="every"):
+        with_previews(iter_deconvolve(blurred, cp, n_times=4), 1.5)
 
 
 def test_generator_returns_result_and_close_stops_it():

@@ -142,7 +142,7 @@ def test_epis_are_the_right_slices():
     np.testing.assert_array_equal(horizontal_epi(col), col[1, :, 2, :])
     with pytest.raises(ValueError, match="out of range"):
         horizontal_epi(lf, v=3)
-    with pytest.raises(ValueError, match="integer"):
+    with pytest.raises(TypeError, match="integer"):
         vertical_epi(lf, u=1.5)
 
 

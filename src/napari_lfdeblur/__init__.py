@@ -3,7 +3,7 @@
 Implements Srinivasan, Ng & Ramamoorthi, "Light Field Blind Motion
 Deblurring" (CVPR 2017) as a Python library and a napari plugin.
 
-The array layout, coordinates and units are those of ``MODEL.md``: a light
+The array layout, coordinates and units are those of docs/model.md: a light
 field is a ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` float32 array in [0, 1], and
 a camera path is a Bezier curve given by ``(n, 3)`` control points.
 
@@ -48,8 +48,8 @@ _PUBLIC = {
     # non-blind deconvolution and the paper's analytic special cases
     "deconvolve": "deconvolution",
     "iter_deconvolve": "deconvolution",
-    "refocus": "deconvolution",
-    "recover_plane_texture": "deconvolution",
+    "refocus": "special_cases",
+    "recover_plane_texture": "special_cases",
     "DeconvolutionParams": "deconvolution",
     # blind deblurring
     "blind_deblur": "blind",

@@ -1,21 +1,86 @@
-"""Checks of light-field arrays shared by the core modules (numpy only: no torch, no Qt)."""
+"""The one check of light-field arrays, and of scalar arguments, shared by every module (numpy only)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+__all__ = ["check_int", "check_number", "validate_lightfield"]
 
-def validate_lightfield(lf, name: str = "light field") -> np.ndarray:
-    """Check a light field array and return it as a numpy array.
 
-    Accepts ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` with ``C`` in 1..4.
+def check_number(value, name: str) -> float:
+    """A finite real number as a float.
+
+    Raises
+    ------
+    TypeError
+        If ``value`` is not a real number (a bool, a string, None, ...).
+    ValueError
+        If it is NaN or infinite.
+    """
+    if isinstance(value, bool) or isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name} must be a number; got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a number; got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite; got {value!r}")
+    return v
+
+
+def check_int(value, name: str, minimum: int | None = None) -> int:
+    """An integer (a Python or numpy integer, not a bool) as an int.
+
+    Raises
+    ------
+    TypeError
+        If ``value`` is not an integer.
+    ValueError
+        If it is below ``minimum``.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer; got {value!r}")
+    if minimum is not None and value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}; got {value}")
+    return int(value)
+
+
+def validate_lightfield(lf, name: str = "light field", *, finite: bool = True) -> np.ndarray:
+    """Check a light field array and return it as a numpy array (not copied).
+
+    A light field is ``(V, U, Y, X)`` (grayscale) or ``(V, U, Y, X, C)`` with
+    ``C`` in 1..4, non-empty, of a real numeric (or bool) dtype, and finite.
+    Every module checks light fields with this one function; the readers
+    turn its ``ValueError`` into a :class:`~napari_lfdeblur.io.LightFieldFormatError`
+    naming the file.
+
+    Parameters
+    ----------
+    lf : array_like
+    name : str
+        What the array is, for the error message.
+    finite : bool, default True
+        Also check that a float array has no NaN or Inf.
+
+    Returns
+    -------
+    ndarray
+        ``np.asarray(lf)``.
 
     Raises
     ------
     ValueError
-        On a wrong number of dimensions, a non-numeric dtype, NaN or Inf.
+        On a wrong number of dimensions or channels, an empty array, a
+        non-numeric or complex dtype, NaN or Inf.
     """
     arr = np.asarray(lf)
+    if arr.ndim in (2, 3):
+        raise ValueError(
+            f"a {name} is 4D (V, U, Y, X) or 5D (V, U, Y, X, C); got a {arr.ndim}D array of shape "
+            f"{arr.shape}. A single image or a stack of views is not enough: arrange the views on a (V, U) grid"
+        )
     if arr.ndim not in (4, 5):
         raise ValueError(
             f"a {name} must be a 4D (V, U, Y, X) or 5D (V, U, Y, X, C) array; "
@@ -23,7 +88,8 @@ def validate_lightfield(lf, name: str = "light field") -> np.ndarray:
         )
     if arr.ndim == 5 and not 1 <= arr.shape[4] <= 4:
         raise ValueError(
-            f"a colour {name} must have 1 to 4 channels in its last axis; got shape {arr.shape}"
+            f"a colour {name} must have 1 to 4 channels in its last axis (the layout is (V, U, Y, X, C)); "
+            f"got shape {arr.shape}"
         )
     if min(arr.shape) < 1:
         raise ValueError(f"the {name} is empty: shape {arr.shape}")
@@ -31,6 +97,6 @@ def validate_lightfield(lf, name: str = "light field") -> np.ndarray:
         raise ValueError(f"a {name} must hold numbers; got dtype {arr.dtype}")
     if np.issubdtype(arr.dtype, np.complexfloating):
         raise ValueError(f"a {name} must be real; got dtype {arr.dtype}")
-    if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
+    if finite and np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
         raise ValueError(f"the {name} contains NaN or Inf values")
     return arr

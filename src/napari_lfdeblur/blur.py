@@ -1,4 +1,4 @@
-"""The light-field motion-blur operator (MODEL.md, "Forward model").
+"""The light-field motion-blur operator (docs/model.md, "Forward model").
 
 For each exposure instant ``t_k`` the angular shifts are::
 
@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ._lightfield import validate_lightfield
+from ._lightfield import check_number, validate_lightfield
 from .devices import select_device
 from .path import bezier_positions, validate_control_points, validate_n_times
 
@@ -124,7 +124,7 @@ def _interp_matrices(shift: torch.Tensor, size: int) -> torch.Tensor:
 
 
 def angular_shifts(positions: torch.Tensor, shape, frame=None):
-    """``s_u(x, t_k) = p_x - x~ p_z`` and ``s_v(y, t_k) = p_y - y~ p_z`` (MODEL.md).
+    """``s_u(x, t_k) = p_x - x~ p_z`` and ``s_v(y, t_k) = p_y - y~ p_z`` (docs/model.md).
 
     Parameters
     ----------
@@ -385,7 +385,7 @@ class BlurOperator:
     shape : tuple of int
         ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` of the light fields it acts on.
     control_points : array_like or torch.Tensor, shape (n, 3)
-        Bezier control points of the path (MODEL.md units). A tensor with
+        Bezier control points of the path (view units; docs/model.md). A tensor with
         ``requires_grad`` makes :meth:`forward` differentiable in the path.
     n_times : int, default 32
         Number of exposure instants ``T >= 2``.
@@ -435,12 +435,7 @@ class BlurOperator:
         self.shape = shape[:4] + ((shape[4],) if len(shape) == 5 else (1,))
         self.frame = validate_frame(frame, self.shape)
         self.n_times = validate_n_times(n_times)
-        try:
-            self.infinity_disparity = float(infinity_disparity)
-        except (TypeError, ValueError):
-            raise ValueError(f"infinity_disparity must be a number; got {infinity_disparity!r}") from None
-        if not np.isfinite(self.infinity_disparity):
-            raise ValueError("infinity_disparity must be finite")
+        self.infinity_disparity = check_number(infinity_disparity, "infinity_disparity")
         self.dtype = dtype
         if isinstance(control_points, torch.Tensor):
             self.device = control_points.device if device in (None, "auto") else select_device(device)
@@ -508,7 +503,7 @@ class BlurOperator:
 
 
 def simulate_blur(lf, control_points, *, n_times: int = 32, infinity_disparity: float = 0.0, device="auto"):
-    """Blur a light field by a camera path, following MODEL.md exactly.
+    """Blur a light field by a camera path, following the forward model of docs/model.md exactly.
 
     Parameters
     ----------

@@ -10,14 +10,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._lightfield import validate_lightfield
+from ._lightfield import check_int, validate_lightfield
 
-__all__ = ["horizontal_epi", "vertical_epi", "view_shifts", "views_transposed"]
+__all__ = [
+    "horizontal_epi",
+    "vertical_epi",
+    "view_shifts",
+    "views_transposed",
+    "shifts_measurable",
+    "transposed_from_shifts",
+]
 
 
 def _index(value, size, name):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be an integer; got {value!r}")
+    value = check_int(value, name)
     if not -size <= value < size:
         raise ValueError(f"{name}={value} is out of range for an axis of length {size}")
     return int(value)
@@ -94,20 +100,24 @@ def _register(ref: np.ndarray, moving: np.ndarray, n_refine: int = 4) -> np.ndar
     return shift
 
 
-def view_shifts(lf) -> np.ndarray:
+def view_shifts(lf, *, validate: bool = True) -> np.ndarray:
     """How far the image moves per view step along each angular axis, in px/view.
 
     The whole centre view is registered (phase correlation refined by
     Lucas-Kanade steps) with the views at both ends of the centre column and
     of the centre row. For a scene at one dominant disparity ``d`` laid out
-    as in MODEL.md (a point at ``x`` in view ``u`` is at ``x + d`` in view
+    as in docs/model.md (a point at ``x`` in view ``u`` is at ``x + d`` in view
     ``u + 1``, likewise for ``v`` and ``y``) the result is
     ``[[d, 0], [0, d]]``.
 
     Parameters
     ----------
     lf : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
-        At least 2 views along each angular axis and 8 x 8 px per view.
+        At least 2 views along each angular axis and 8 x 8 px per view
+        (:func:`shifts_measurable`). Only five views are read.
+    validate : bool, default True
+        Check ``lf`` first (False for an array already checked, such as one
+        just read: skips a pass over the whole array).
 
     Returns
     -------
@@ -131,19 +141,9 @@ def view_shifts(lf) -> np.ndarray:
     array([[0., 2.],
            [2., 0.]])
     """
-    arr = validate_lightfield(lf)
-    if not _measurable(arr.shape):
+    arr = validate_lightfield(lf) if validate else np.asarray(lf)
+    if not shifts_measurable(arr.shape):
         raise ValueError(f"view_shifts needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
-    return _view_shifts(arr)
-
-
-def _measurable(shape) -> bool:
-    """Whether :func:`view_shifts` can measure a light field of this shape."""
-    return min(shape[:2]) >= 2 and min(shape[2:4]) >= 8
-
-
-def _view_shifts(arr: np.ndarray) -> np.ndarray:
-    """:func:`view_shifts` of a light field already checked (reads five views only)."""
     V, U = arr.shape[:2]
     cv, cu = (V - 1) // 2, (U - 1) // 2
     ref = _gray_view(arr, cv, cu)
@@ -160,15 +160,20 @@ def _view_shifts(arr: np.ndarray) -> np.ndarray:
     return out
 
 
+def shifts_measurable(shape) -> bool:
+    """Whether :func:`view_shifts` can measure a light field of this shape (at least 2 x 2 views of 8 x 8 px)."""
+    return min(shape[:2]) >= 2 and min(shape[2:4]) >= 8
+
+
 def views_transposed(lf, min_shift: float = 0.1) -> bool | None:
     """Whether the angular axes of a light field look swapped against its spatial ones.
 
-    In the layout of MODEL.md, stepping through ``u`` moves the image along
+    In the layout of docs/model.md, stepping through ``u`` moves the image along
     ``x`` and stepping through ``v`` moves it along ``y``. Exported view
     folders sometimes name their views the other way round (the row index
     being the horizontal one), and the light field read then moves along
     ``y`` with ``u``: blur simulation, deconvolution and the blind solver
-    all assume the layout of MODEL.md. Swapping the first two axes
+    all assume that layout. Swapping the first two axes
     (``lf.swapaxes(0, 1)``) fixes such a light field.
 
     Parameters
@@ -181,15 +186,15 @@ def views_transposed(lf, min_shift: float = 0.1) -> bool | None:
     -------
     bool or None
         True when the motion is mostly across (``u`` moves ``y``, ``v``
-        moves ``x``), False when it is mostly along the MODEL.md axes, None
+        moves ``x``), False when it is mostly along the documented axes, None
         when the scene barely moves between views (a light field focused on
         its content) or the motion is not clearly either.
     """
-    return _transposed(view_shifts(lf), min_shift)
+    return transposed_from_shifts(view_shifts(lf), min_shift)
 
 
-def _transposed(shifts: np.ndarray, min_shift: float = 0.1) -> bool | None:
-    """:func:`views_transposed` from the (2, 2) result of :func:`view_shifts`."""
+def transposed_from_shifts(shifts: np.ndarray, min_shift: float = 0.1) -> bool | None:
+    """:func:`views_transposed` from the ``(2, 2)`` result of :func:`view_shifts`."""
     s = np.abs(shifts)
     along, across = s[0, 0] + s[1, 1], s[0, 1] + s[1, 0]
     if max(along, across) < 2 * min_shift:

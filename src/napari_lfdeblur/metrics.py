@@ -9,7 +9,7 @@ the replicated boundary of the blur model makes the outermost pixels
 unrecoverable.
 
 Path metrics (:func:`path_error`) are blind to what a blur cannot identify
-(MODEL.md "Ambiguities", FINDINGS.md section 3): the mean offset of the path
+(docs/model.md, "Ambiguities"): the mean offset of the path
 (the zero-mean gauge) and the order in which positions are visited.
 """
 
@@ -90,7 +90,7 @@ def psnr(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> floa
     estimate, reference : ndarray
         Same shape: a light field ``(V, U, Y, X[, C])`` or an image ``(Y, X[, C])``.
     data_range : float, default 1.0
-        The intensity range (1 for MODEL.md's [0, 1] light fields).
+        The intensity range (1 for light fields in [0, 1]).
     crop : int, default 0
         Pixels removed from each spatial border before comparing.
 
@@ -276,13 +276,13 @@ def path_error(
     """Compare an estimated camera path with the true one, blind to gauge and time order.
 
     Both paths are sampled at ``n_times`` instants and moved to the zero-mean
-    gauge (their mean position over the exposure subtracted), as MODEL.md
+    gauge (their mean position over the exposure subtracted), as docs/model.md
     prescribes. Then:
 
     - the **Chamfer distance** compares the two sets of positions;
     - the **RMSE** compares positions at equal instants, for the better of
       the two time directions, also relative to the true path's extent;
-    - with ``lightfield`` given, the **blur mismatch** (FINDINGS.md section 3)
+    - with ``lightfield`` given, the **blur mismatch** (docs/model.md, "Judging a path estimate")
       ``||B(l, p_est) - B(l, p_true)|| / ||B(l, p_true) - l||`` compares the
       blurs the two centred paths produce on that (sharp) light field.
 
@@ -291,7 +291,7 @@ def path_error(
     Parameters
     ----------
     estimated_cp, true_cp : array_like, shape (n, 3)
-        Bezier control points (MODEL.md units).
+        Bezier control points (view units; docs/model.md).
     n_times : int, default 64
         Instants used to sample both paths and to render the blurs.
     lightfield : ndarray, optional, shape (V, U, Y, X[, C])

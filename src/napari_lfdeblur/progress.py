@@ -88,10 +88,12 @@ def run_to_completion(gen, callback=None):
 def with_previews(gen, every: int):
     """Wrap a solver generator so that every ``every``-th record carries a preview.
 
-    The wrapper calls ``record.estimate()`` on the 1st, ``every+1``-th, ...
-    record that has one, and on the last record of the run, and stores the
-    array in ``record.preview``; other records pass through unchanged. It
-    returns the wrapped generator's result, and closing it closes ``gen``.
+    Counting only the records that carry an ``estimate``, the wrapper calls
+    ``record.estimate()`` on the ``every``-th, ``2 every``-th, ... of them and
+    stores the array in ``record.preview``, in the thread that iterates the
+    wrapper (a napari widget's worker thread, not the GUI thread); other
+    records pass through unchanged. It returns the wrapped generator's
+    result, and closing it closes ``gen``.
 
     Parameters
     ----------
@@ -123,9 +125,9 @@ def _with_previews(gen, every):
             except StopIteration as stop:
                 return stop.value
             if every and record.estimate is not None and record.preview is None:
+                count += 1
                 if count % every == 0:
                     record.preview = record.estimate()
-                count += 1
             yield record
     finally:
         gen.close()

@@ -1,7 +1,7 @@
 """Reading and writing light fields.
 
 :func:`read_lightfield` turns any supported layout into a ``(V, U, Y, X)`` or
-``(V, U, Y, X, C)`` float32 array in [0, 1] (see ``MODEL.md``);
+``(V, U, Y, X, C)`` float32 array in [0, 1] (see docs/model.md);
 :func:`write_lightfield` writes one back. Supported layouts (the names that
 :func:`detect_layout` returns and ``layout=`` accepts):
 
@@ -259,7 +259,7 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
 
 
 class ViewOrderWarning(UserWarning):
-    """The views of a light field just read look transposed against MODEL.md's layout.
+    """The views of a light field just read look transposed against the light-field layout.
 
     Its ``shifts`` attribute holds the measurement, as :func:`~napari_lfdeblur.view_shifts` returns it.
     """
@@ -267,19 +267,19 @@ class ViewOrderWarning(UserWarning):
 
 def _check_view_order(lf, path, metadata) -> None:
     """Record the views' motion (px/view) in ``metadata`` and warn when the view axes look swapped."""
-    from ..epi import _measurable, _transposed, _view_shifts
+    from ..epi import shifts_measurable, transposed_from_shifts, view_shifts
 
-    if not _measurable(lf.shape):
+    if not shifts_measurable(lf.shape):
         return
-    shifts = _view_shifts(lf)
+    shifts = view_shifts(lf, validate=False)
     metadata["view_shifts"] = np.round(shifts, 3).tolist()
-    if _transposed(shifts):
+    if transposed_from_shifts(shifts):
         fix = (r"pass pattern=r'_(?P<col>\d+)_(?P<row>\d+)\.\w+$' to name the numbers the other way round, or "
                if metadata["layout"] in ("views", "hci", "stanford") else "")
         warning = ViewOrderWarning(
             f"{path}: the views look transposed: stepping through u moves the image along y by "
             f"{shifts[1, 0]:+.2f} px/view and stepping through v moves it along x by {shifts[0, 1]:+.2f} px/view, "
-            f"where MODEL.md's layout has u move x and v move y. Blur, deconvolution and blind deblurring assume "
+            f"where the light-field layout has u move x and v move y. Blur, deconvolution and blind deblurring assume "
             f"that layout: {fix}swap the first two axes (lf.swapaxes(0, 1))."
         )
         warning.shifts = shifts

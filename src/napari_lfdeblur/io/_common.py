@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._lightfield import validate_lightfield as check_lightfield
+
 from .._memory import host_available_memory
 
 __all__ = [
@@ -172,33 +174,17 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
 
 
 def validate_lightfield(lf, path="light field") -> np.ndarray:
-    """Check the dimensions of a light field array; returns it as an ndarray.
+    """The light field check of :func:`napari_lfdeblur._lightfield.validate_lightfield` for a file's array.
 
-    A light field is ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` with C in 1, 3, 4
-    (a trailing C of 1 is dropped).
+    The same rules; a failure is a :class:`LightFieldFormatError` that names
+    ``path``, and a trailing channel axis of length 1 is dropped. NaN and Inf
+    are left to :func:`to_float01`, which counts them.
     """
-    lf = np.asarray(lf)
-    if lf.ndim in (2, 3):
-        raise LightFieldFormatError(
-            f"{path}: got a {lf.ndim}D array of shape {lf.shape}; a light field is 4D (V, U, Y, X) "
-            f"or 5D (V, U, Y, X, C). A single image or a stack of views is not enough: arrange "
-            f"the views on a (V, U) grid"
-        )
-    if lf.ndim not in (4, 5):
-        raise LightFieldFormatError(
-            f"{path}: got a {lf.ndim}D array of shape {lf.shape}; expected 4D (V, U, Y, X) or 5D (V, U, Y, X, C)"
-        )
-    if lf.ndim == 5:
-        if lf.shape[-1] == 1:
-            lf = lf[..., 0]
-        elif lf.shape[-1] not in (3, 4):
-            raise LightFieldFormatError(
-                f"{path}: 5D array of shape {lf.shape} has {lf.shape[-1]} channels; expected 1, 3 or 4 "
-                f"(the layout is (V, U, Y, X, C))"
-            )
-    if min(lf.shape[:4]) < 1:
-        raise LightFieldFormatError(f"{path}: the light field is empty (shape {lf.shape})")
-    return lf
+    try:
+        lf = check_lightfield(lf, str(path), finite=False)
+    except ValueError as exc:
+        raise LightFieldFormatError(f"{path}: {exc}") from None
+    return lf[..., 0] if lf.ndim == 5 and lf.shape[-1] == 1 else lf
 
 
 # ----------------------------------------------------------------- atomic writes

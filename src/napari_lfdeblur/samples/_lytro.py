@@ -23,7 +23,7 @@ def lytro_sample() -> np.ndarray:
     Returns
     -------
     ndarray, float32, shape (9, 9, 128, 128, 3)
-        Values in [0, 1], in the ``(V, U, Y, X, C)`` layout of MODEL.md.
+        Values in [0, 1], in the ``(V, U, Y, X, C)`` layout of docs/model.md.
 
     Notes
     -----

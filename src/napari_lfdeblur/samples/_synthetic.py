@@ -76,7 +76,7 @@ def synthetic_scene(
     lf : ndarray, float32, shape (V, U, Y, X) or (V, U, Y, X, 3)
         The light field, values in [0, 1].
     disparity : ndarray, float32, shape (Y, X)
-        Ground-truth disparity of the centre view (px/view, MODEL.md sign:
+        Ground-truth disparity of the centre view (px/view, docs/model.md sign:
         a point at ``x`` in view ``u`` is at ``x + d`` in view ``u + 1``).
 
     Examples
