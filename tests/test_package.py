@@ -59,3 +59,100 @@ def test_sample_data_contributions():
     assert kind == "image" and kwargs["rgb"] and kwargs["axis_labels"] == ("v", "u", "y", "x")
     (lytro, kw, _), = lytro_sample_layer()
     assert lytro.shape == (9, 9, 128, 128, 3) and "CC BY 4.0" in kw["metadata"]["source"]
+
+
+# ------------------------------------------------------------ code layout rules
+
+SRC = ROOT / "src" / "napari_lfdeblur"
+
+
+def _modules():
+    return sorted(p for p in SRC.rglob("*.py"))
+
+
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _is_module(path, node, name) -> bool:
+    """Whether ``from <node.module> import name`` in ``path`` imports a module (a private module is fine)."""
+    base = path.parent
+    for _ in range(max(node.level - 1, 0)):
+        base = base.parent
+    if node.level == 0:
+        base = SRC.parent
+    base = base.joinpath(*(node.module or "").split(".")) if node.module else base
+    return (base / f"{name}.py").exists() or (base / name / "__init__.py").exists()
+
+
+def test_no_module_imports_a_private_name_from_another_module():
+    import ast
+
+    bad = []
+    for path in _modules():
+        tree = ast.parse(path.read_text(), filename=str(path))
+        module_aliases = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").startswith("napari_lfdeblur")):
+                for alias in node.names:
+                    if _is_private(alias.name) and not _is_module(path, node, alias.name):
+                        bad.append(f"{path.relative_to(SRC)}:{node.lineno} imports {alias.name}")
+                    else:
+                        module_aliases.add(alias.asname or alias.name)
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.name.startswith("napari_lfdeblur"):
+                        module_aliases.add((alias.asname or alias.name).split(".")[0])
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                    and node.value.id in module_aliases and _is_private(node.attr)):
+                bad.append(f"{path.relative_to(SRC)}:{node.lineno} uses {node.value.id}.{node.attr}")
+    assert not bad, "\n".join(bad)
+
+
+def test_modules_and_functions_stay_short():
+    """No module over 500 lines, no function over 80 (its docstring aside), unless a ``# long:`` comment says why."""
+    import ast
+
+    long = []
+    for path in _modules():
+        text = path.read_text()
+        lines = text.splitlines()
+        if len(lines) > 500 and "# long:" not in text:
+            long.append(f"{path.relative_to(SRC)}: {len(lines)} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                doc = node.body[0]
+                if isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant) and isinstance(doc.value.value, str):
+                    n -= doc.end_lineno - doc.lineno + 1
+                body = "\n".join(lines[node.lineno - 1 : node.end_lineno])
+                if n > 80 and "# long:" not in body:
+                    long.append(f"{path.relative_to(SRC)}:{node.lineno} {node.name}: {n} lines")
+    assert not long, "\n".join(long)
+
+
+def test_no_backslash_continuations():
+    bad = [f"{p.relative_to(SRC)}:{i}" for p in _modules()
+           for i, line in enumerate(p.read_text().splitlines(), 1) if line.rstrip().endswith("\\")]
+    assert not bad, bad
+
+
+def test_docs_and_code_stand_alone():
+    """Neither code nor docs send a reader to files outside the repository, or tell its history."""
+    import re
+
+    pattern = re.compile(r"MODEL.md|FINDINGS.md|session")  # as `grep "MODEL.md\|FINDINGS.md\|session"`
+    files = [*_modules(), ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    bad = [f"{p.relative_to(ROOT)}:{i}: {line.strip()}" for p in files
+           for i, line in enumerate(p.read_text().splitlines(), 1) if pattern.search(line)]
+    assert not bad, "\n".join(bad)
+
+
+def test_public_modules_list_only_names_they_define():
+    import importlib
+
+    for module in sorted({v for v in napari_lfdeblur._PUBLIC.values()}):
+        mod = importlib.import_module(f"napari_lfdeblur.{module}")
+        for name in getattr(mod, "__all__", []):
+            assert hasattr(mod, name), f"napari_lfdeblur.{module}.__all__ lists {name}, which it lacks"
