@@ -43,7 +43,7 @@ from ._params import JsonParams
 from .progress import Progress, run_to_completion
 from .blur import BlurOperator, from_tensor, to_tensor, validate_frame
 from .devices import select_device
-from .path import bezier_positions, validate_control_points, validate_n_times
+from .path import validate_control_points, validate_n_times
 from .priors import divergence4d, gradient_norm_bound, project_tv_dual
 from .special_cases import inplane_matrix, solve_inplane
 
