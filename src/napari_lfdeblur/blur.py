@@ -26,8 +26,9 @@ enough to stay in cache, with no ``T``-fold copy of the light field. A
 custom autograd function recomputes the blocks in the backward pass, so
 gradients for both the light field and the path store no intermediates.
 
-With ``d_inf != 0`` each instant also resamples ``y`` and ``x`` (two taps
-each, gathered along whole rows and columns) before its angular kernel.
+With ``d_inf != 0`` each instant also shifts ``y`` and ``x``; the exposure is
+then one kernel over 4D integer offsets ``(v, y, u, x)``, applied the same
+way (:func:`~napari_lfdeblur._taps4d.tap_kernel_4d`).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import torch
 from ._lightfield import check_number, validate_lightfield
 from .devices import select_device
 from ._taps import TapBlur, Taps, tap_kernel
+from ._taps4d import TapBlur4D, Taps4D, tap_kernel_4d
 from .path import bezier_positions, validate_control_points, validate_n_times
 
 __all__ = [
@@ -176,38 +178,6 @@ def interpolation_matrices(positions: torch.Tensor, shape):
     return _interp_matrices(s_u, shape[1]), _interp_matrices(s_v, shape[0]), s_u, s_v
 
 
-# ------------------------------------------------------ spatial resample
-
-
-def _spatial_taps(shape, s_u_k, s_v_k, d_inf, dtype):
-    """Taps of the spatial resampling at ``y + d_inf s_v(y)``, ``x + d_inf s_u(x)`` (one instant)."""
-    Y, X = shape[2], shape[3]
-    ys = torch.arange(Y, dtype=s_v_k.dtype, device=s_v_k.device)
-    xs = torch.arange(X, dtype=s_u_k.dtype, device=s_u_k.device)
-    y0, y1, wy = _lerp_taps(ys + d_inf * s_v_k, Y)
-    x0, x1, wx = _lerp_taps(xs + d_inf * s_u_k, X)
-    return y0, y1, wy.to(dtype)[None, None, :, None, None], x0, x1, wx.to(dtype)[None, None, None, :, None]
-
-
-def _spatial_resample(L, s_u_k, s_v_k, d_inf):
-    """Resample ``y`` at ``y + d_inf s_v(y)`` and ``x`` at ``x + d_inf s_u(x)`` (one instant)."""
-    y0, y1, wy, x0, x1, wx = _spatial_taps(L.shape, s_u_k, s_v_k, d_inf, L.dtype)
-    Ly = L.index_select(2, y0) * (1 - wy) + L.index_select(2, y1) * wy
-    return Ly.index_select(3, x0) * (1 - wx) + Ly.index_select(3, x1) * wx
-
-
-def _spatial_resample_adjoint(G, s_u_k, s_v_k, d_inf):
-    """Adjoint of :func:`_spatial_resample` (scatter-add of the taps)."""
-    y0, y1, wy, x0, x1, wx = _spatial_taps(G.shape, s_u_k, s_v_k, d_inf, G.dtype)
-    Gx = torch.zeros_like(G)
-    Gx.index_add_(3, x0, G * (1 - wx))
-    Gx.index_add_(3, x1, G * wx)
-    out = torch.zeros_like(G)
-    out.index_add_(2, y0, Gx * (1 - wy))
-    out.index_add_(2, y1, Gx * wy)
-    return out
-
-
 # -------------------------------------------------------------- operator
 
 
@@ -287,14 +257,11 @@ class BlurOperator:
         V, U = self.shape[:2]
         #: angular shifts s_u (T, X) and s_v (T, Y) of every instant
         self.s_u, self.s_v = angular_shifts(self.positions, self.shape, self.frame)
+        # one kernel for the whole exposure: over view offsets, or over 4D offsets when d_inf != 0
         if self.infinity_disparity == 0.0:
-            # one kernel for the whole exposure
-            self._kernels = [tap_kernel(self.s_u, self.s_v, U, V)]
+            self._kernel = tap_kernel(self.s_u, self.s_v, U, V)
         else:
-            # the spatial resampling differs per instant: one kernel per instant
-            self._kernels = [
-                tap_kernel(self.s_u[k : k + 1], self.s_v[k : k + 1], U, V) for k in range(self.n_times)
-            ]
+            self._kernel = tap_kernel_4d(self.s_u, self.s_v, self.infinity_disparity, self.shape)
 
     def _check(self, t: torch.Tensor) -> torch.Tensor:
         if not isinstance(t, torch.Tensor):
@@ -307,13 +274,10 @@ class BlurOperator:
         """Blur ``lf`` (shape ``(V, U, Y, X, C)``); differentiable in ``lf`` and the path."""
         L = self._check(lf)
         if self.infinity_disparity == 0.0:
-            K, ov, ou = self._kernels[0]
+            K, ov, ou = self._kernel
             return TapBlur.apply(L, K, ov, ou, self.block_elements)
-        out = torch.zeros_like(L)
-        for k, (K, ov, ou) in enumerate(self._kernels):
-            Lk = _spatial_resample(L, self.s_u[k], self.s_v[k], self.infinity_disparity)
-            out = out + TapBlur.apply(Lk, K, ov, ou, self.block_elements)
-        return out / self.n_times
+        K, offsets = self._kernel
+        return TapBlur4D.apply(L, K, offsets, self.block_elements)
 
     __call__ = forward
 
@@ -321,15 +285,10 @@ class BlurOperator:
         """The adjoint (transpose) of :meth:`forward` in the light field, for a fixed path."""
         G = self._check(y).detach().contiguous()
         if self.infinity_disparity == 0.0:
-            K, ov, ou = self._kernels[0]
+            K, ov, ou = self._kernel
             return Taps(self.shape, K.detach(), ov, ou, self.block_elements).adjoint(G)
-        out = torch.zeros_like(G)
-        for k, (K, ov, ou) in enumerate(self._kernels):
-            Gk = Taps(self.shape, K.detach(), ov, ou, self.block_elements).adjoint(G)
-            out += _spatial_resample_adjoint(
-                Gk, self.s_u[k].detach(), self.s_v[k].detach(), self.infinity_disparity
-            )
-        return out / self.n_times
+        K, offsets = self._kernel
+        return Taps4D(self.shape, K.detach(), offsets, self.block_elements).adjoint(G)
 
     def is_in_plane(self) -> bool:
         """True when ``p_z = 0`` and ``d_inf = 0``: the blur is the same 4D convolution at every pixel."""

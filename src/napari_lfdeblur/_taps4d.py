@@ -1,0 +1,212 @@
+"""The blur with a non-zero infinity disparity as one kernel over 4D integer offsets.
+
+With ``d_inf != 0`` instant ``k`` samples the sharp light field at
+``(v + s_v, u + s_u, y + d s_v, x + d s_u)``, bilinearly on every axis. The
+``(v, y)`` part of that lookup depends only on the row ``y`` and the
+``(u, x)`` part only on the column ``x``, so each instant is, at every
+pixel, a 16-tap kernel over integer offsets ``(a, b, c, e)`` of
+``(v, y, u, x)``. Summed over the exposure the kernel of pixel ``(y, x)`` is
+
+    K[y, x, (a, b), (c, e)] = (1/T) sum_k hv_k[y, (a, b)] hu_k[x, (c, e)],
+
+the bilinear histogram of the 4D lookups the pixel goes through, and
+
+    f[v, u, y, x] = sum_taps K[tap][y, x] l[clamp(v + a), clamp(u + c), clamp(y + b), clamp(x + e)].
+
+Only the offset quadruples some instant actually uses are kept (the
+``(v, y)`` offsets of a path trace a band, not a box), and each is one
+multiply-add pass over blocks of rows, whatever ``T``. Clamping the indices
+of the taps reproduces the clamped-coordinate bilinear lookup of the model
+exactly: beyond an edge both taps of an axis read the edge sample.
+"""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = ["pair_splat", "tap_kernel_4d", "Taps4D", "TapBlur4D"]
+
+
+def pair_splat(shift: torch.Tensor, d_inf: float, n_views: int, n_pixels: int):
+    """Bilinear splat of the lookups ``(a + shift, i + d_inf shift)`` onto integer offset pairs.
+
+    Parameters
+    ----------
+    shift : torch.Tensor, shape (T, n)
+        The angular shift of each instant at each of ``n`` rows (or columns).
+    d_inf : float
+        The infinity disparity, px/view.
+    n_views, n_pixels : int
+        Sizes of the angular and the spatial axis.
+
+    Returns
+    -------
+    h : torch.Tensor, shape (T, n, P)
+        Weight of each offset pair, differentiable in ``shift``.
+    pairs : torch.Tensor, int64, shape (P, 2)
+        The ``(angular, spatial)`` offsets of the pairs.
+    """
+    offs, fracs = [], []
+    for scale, size in ((1.0, n_views), (d_inf, n_pixels)):
+        if size == 1:
+            offs.append(torch.zeros_like(shift, dtype=torch.long))
+            fracs.append(torch.zeros_like(shift))
+            continue
+        lim = size - 1.0
+        s = (scale * shift).clamp(-lim, lim)
+        o = torch.floor(s.detach()).clamp_(-lim, lim - 1).long()
+        offs.append(o)
+        fracs.append(s - o.to(s.dtype))
+    (oa, ob), (fa, fb) = offs, fracs
+    corners = [(0, 0, (1 - fa) * (1 - fb)), (1, 0, fa * (1 - fb)), (0, 1, (1 - fa) * fb), (1, 1, fa * fb)]
+    a = torch.stack([oa + i for i, _, _ in corners], dim=-1)  # (T, n, 4)
+    b = torch.stack([ob + j for _, j, _ in corners], dim=-1)
+    w = torch.stack([c for _, _, c in corners], dim=-1)
+    a_min, b_min = int(a.min()), int(b.min())
+    width = int(b.max()) - b_min + 1
+    code = (a - a_min) * width + (b - b_min)
+    uniq, inverse = torch.unique(code, return_inverse=True)
+    h = w.new_zeros(shift.shape + (len(uniq),)).scatter_add(-1, inverse, w)
+    pairs = torch.stack([uniq // width + a_min, uniq % width + b_min], dim=1)
+    return h, pairs
+
+
+def tap_kernel_4d(s_u: torch.Tensor, s_v: torch.Tensor, d_inf: float, shape):
+    """The per-pixel kernel over the 4D offsets the exposure uses.
+
+    Parameters
+    ----------
+    s_u : torch.Tensor, shape (T, X)
+    s_v : torch.Tensor, shape (T, Y)
+    d_inf : float
+    shape : tuple
+        ``(V, U, Y, X, ...)`` of the light field.
+
+    Returns
+    -------
+    K : torch.Tensor, shape (S, Y, X)
+        Weight maps of the ``S`` taps, differentiable in the shifts.
+    offsets : torch.Tensor, int64, shape (S, 4)
+        The ``(a, b, c, e)`` offsets of ``(v, y, u, x)`` of each tap.
+    """
+    V, U, Y, X = shape[:4]
+    hv, pv = pair_splat(s_v, d_inf, V, Y)  # (T, Y, P)
+    hu, pu = pair_splat(s_u, d_inf, U, X)  # (T, X, Q)
+    # the taps some instant uses: an offset pair of v active with one of u at the same instant
+    av = (hv.detach() != 0).any(dim=1).to(hv.dtype)  # (T, P)
+    au = (hu.detach() != 0).any(dim=1).to(hu.dtype)  # (T, Q)
+    p, q = ((av.T @ au) > 0).nonzero(as_tuple=True)
+    K = torch.einsum("kys,kxs->syx", hv[:, :, p], hu[:, :, q]) / s_u.shape[0]
+    offsets = torch.stack([pv[p, 0], pv[p, 1], pu[q, 0], pu[q, 1]], dim=1)
+    return K, offsets
+
+
+def _rows_per_block(n_per_row: int, budget: int, Y: int) -> int:
+    return int(max(1, min(Y, budget // max(1, n_per_row))))
+
+
+def _fold(padded: torch.Tensor, dim: int, index: list, size: int) -> torch.Tensor:
+    """Adjoint of ``padded = t.index_select(dim, index)`` for a short ``index``."""
+    shape = list(padded.shape)
+    shape[dim] = size
+    out = padded.new_zeros(shape)
+    for i, src in enumerate(index):
+        out.select(dim, src).add_(padded.select(dim, i))
+    return out
+
+
+class Taps4D:
+    """Block-wise application of a 4D tap kernel, its adjoint and its kernel gradient (no autograd).
+
+    Inside a block the light field is held replicate-padded as
+    ``(V', U', C, rows', X')``, so every tap is a strided slice and the
+    innermost loop of its multiply-add runs along ``x``.
+    """
+
+    def __init__(self, shape, K, offsets, block_elements):
+        V, U, Y, X, C = shape
+        self.shape = shape
+        self.K = K.detach()
+        dev = K.device
+        off = offsets.tolist()
+        self.lo = [min(min(o[i] for o in off), 0) for i in range(4)]  # (v, y, u, x)
+        hi = [max(max(o[i] for o in off), 0) for i in range(4)]
+        self.iv = torch.arange(self.lo[0], V + hi[0], device=dev).clamp_(0, V - 1)
+        self.iu = torch.arange(self.lo[2], U + hi[2], device=dev).clamp_(0, U - 1)
+        self.ix = torch.arange(self.lo[3], X + hi[3], device=dev).clamp_(0, X - 1)
+        self.iv_list, self.iu_list = self.iv.tolist(), self.iu.tolist()
+        self.pad_y = (self.lo[1], hi[1])
+        self.taps = [(a - self.lo[0], b - self.lo[1], c - self.lo[2], e - self.lo[3]) for a, b, c, e in off]
+        per_row = len(self.iv) * len(self.iu) * len(self.ix) * C
+        self.step = _rows_per_block(per_row, block_elements, Y)
+
+    def blocks(self):
+        Y = self.shape[2]
+        for y0 in range(0, Y, self.step):
+            y1 = min(Y, y0 + self.step)
+            rows = torch.arange(y0 + self.pad_y[0], y1 + self.pad_y[1], device=self.K.device).clamp_(0, Y - 1)
+            yield slice(y0, y1), rows
+
+    def _padded(self, T, rows):
+        """``T`` at the padded rows ``rows``, replicate-padded in (v, u, x), as (V', U', C, rows', X')."""
+        Tb = T.index_select(2, rows).index_select(3, self.ix)[self.iv[:, None], self.iu[None, :]]
+        return Tb.permute(0, 1, 4, 2, 3).contiguous()
+
+    def _slice(self, t, tap, n_rows):
+        V, U, _, X, _ = self.shape
+        a, b, c, e = tap
+        return t[a : a + V, c : c + U, :, b : b + n_rows, e : e + X]
+
+    def forward(self, L):
+        V, U = self.shape[:2]
+        out = torch.empty_like(L)
+        for block, rows in self.blocks():
+            Lp = self._padded(L, rows)
+            n = block.stop - block.start
+            acc = Lp.new_zeros((V, U, Lp.shape[2], n, self.shape[3]))
+            for s, tap in enumerate(self.taps):
+                acc.addcmul_(self._slice(Lp, tap, n), self.K[s, block])
+            out[:, :, block] = acc.permute(0, 1, 3, 4, 2)
+        return out
+
+    def backward(self, L, G, need_L=True, need_K=False):
+        """``(adjoint(G), d<G, forward(L)>/dK)``, each None when not needed."""
+        V, U, Y, X, C = self.shape
+        gL = torch.zeros_like(G) if need_L else None
+        gK = torch.zeros_like(self.K) if need_K else None
+        for block, rows in self.blocks():
+            n = block.stop - block.start
+            Gb = G[:, :, block].permute(0, 1, 4, 2, 3).contiguous()
+            if need_K:
+                Lp = self._padded(L, rows)
+                for s, tap in enumerate(self.taps):
+                    gK[s, block] = (Gb * self._slice(Lp, tap, n)).sum(dim=(0, 1, 2))
+            if need_L:
+                gp = Gb.new_zeros((len(self.iv), len(self.iu), C, len(rows), len(self.ix)))
+                for s, tap in enumerate(self.taps):
+                    self._slice(gp, tap, n).addcmul_(Gb, self.K[s, block])
+                # adjoint of the padding: v and u (few) by slices, x and y by index_add
+                g = _fold(_fold(gp, 0, self.iv_list, V), 1, self.iu_list, U)
+                g = g.new_zeros(g.shape[:4] + (X,)).index_add_(4, self.ix, g)
+                gL.index_add_(2, rows, g.permute(0, 1, 3, 4, 2))
+        return gL, gK
+
+    def adjoint(self, G):
+        return self.backward(None, G, need_L=True, need_K=False)[0]
+
+
+class TapBlur4D(torch.autograd.Function):
+    """``f = taps(K) * L`` over 4D offsets, with gradients for the light field and the kernel."""
+
+    @staticmethod
+    def forward(ctx, L, K, offsets, block_elements):
+        taps = Taps4D(L.shape, K, offsets, block_elements)
+        ctx.save_for_backward(L)
+        ctx.taps = taps
+        return taps.forward(L)
+
+    @staticmethod
+    def backward(ctx, G):
+        (L,) = ctx.saved_tensors
+        gL, gK = ctx.taps.backward(L, G.contiguous(), ctx.needs_input_grad[0], ctx.needs_input_grad[1])
+        return gL, gK, None, None
