@@ -11,7 +11,7 @@ path error. docs/blind.md ("The edge model, switched on late") quotes its figure
 
 Usage::
 
-    python benchmarks/blind_latent_at_true_path.py [--cases syn-p1,lytro-p1,lytro2-p4] [--sigmas 0,0.3,0.5,0.8]
+    python benchmarks/dev/blind_latent_at_true_path.py [--cases syn-p1,lytro-p1,lytro2-p4] [--sigmas 0,0.3,0.5,0.8]
 
 In-plane cases only (the true path's ``p_z`` is dropped for the latent).
 """

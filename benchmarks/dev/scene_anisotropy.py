@@ -30,7 +30,7 @@ docs/blind.md ("The Lytro views are softer along x") quotes the figures.
 
 Usage::
 
-    python benchmarks/scene_anisotropy.py [--json eval.json] [--run lytro-p1,lytro2-p4] [--sigma 0.57]
+    python benchmarks/dev/scene_anisotropy.py [--json eval.json] [--run lytro-p1,lytro2-p4] [--sigma 0.57]
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ Lytro crops had their view axes swapped") quotes its figures.
 
 Usage::
 
-    python benchmarks/view_order.py
+    python benchmarks/dev/view_order.py
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ quotes its figures.
 
 Usage::
 
-    python benchmarks/blind_ambiguity.py [--cases syn-p1,syn-p2,lytro-p1,lytro-p2] [--scales 0.7,0.8,0.9]
+    python benchmarks/dev/blind_ambiguity.py [--cases syn-p1,syn-p2,lytro-p1,lytro-p2] [--scales 0.7,0.8,0.9]
 """
 
 from __future__ import annotations
