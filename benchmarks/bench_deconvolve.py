@@ -17,12 +17,10 @@ Usage::
 
     python benchmarks/bench_deconvolve.py                    # CPU, and CUDA when available
     python benchmarks/bench_deconvolve.py --devices cuda --tv-iterations 50
-    python benchmarks/bench_deconvolve.py --quick            # small smoke run
-    python benchmarks/bench_deconvolve.py --write            # also write docs/benchmarks_deconvolve.md
+    python benchmarks/bench_deconvolve.py --quick            # small smoke run, writes nothing
 
-``--write`` replaces the rows of the devices measured in
-``docs/benchmarks_deconvolve.md`` and keeps the others, so CPU and GPU
-figures can be measured on different machines.
+The table goes to ``docs/benchmarks/bench_deconvolve.md`` (or ``--out``),
+replacing it.
 """
 
 from __future__ import annotations
@@ -37,9 +35,10 @@ import threading
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _report  # noqa: E402  (benchmarks/_report.py)
+
 SHAPE = (9, 9, 376, 541, 3)
-DOC = ROOT / "docs" / "benchmarks_deconvolve.md"
 
 
 def _rss_bytes() -> int:
@@ -119,40 +118,29 @@ def _fmt(r: dict) -> str:
     per = f"{r['per_iteration_s']:.2f}" if "per_iteration_s" in r else "-"
     mem = f"{r['cuda_peak_gib']:.2f} (GPU)" if "cuda_peak_gib" in r else f"{r['rss_peak_above_input_gib']:.2f} (RSS)"
     return (f"| {r['device']} ({r['device_name']}, {r['threads']} threads) | {r['case']} | "
-            f"{'x'.join(map(str, r['shape']))} | {r['iterations']} | {r['total_s']:.1f} | {per} | {mem} | "
-            f"{r.get('load_average', float('nan')):.1f} |")
+            f"{'x'.join(map(str, r['shape']))} | {r['iterations']} | {r['total_s']:.1f} | {per} | {mem} |")
 
 
 HEADER = [
-    "| device | method | shape | iterations | total (s) | per iteration (s) | peak memory (GiB) | load avg |",
-    "|---|---|---|---|---|---|---|---|",
+    "| device | method | shape | iterations | total (s) | per iteration (s) | peak memory (GiB) |",
+    "|---|---|---|---|---|---|---|",
 ]
 
 
-def _write(results):
-    keep = []
-    measured = {r["device"] for r in results}
-    if DOC.exists():
-        for line in DOC.read_text().splitlines():
-            if line.startswith("| ") and not line.startswith("| device") and line.split(" ")[1] not in measured:
-                keep.append(line)
-    lines = [
-        "# deconvolve: time and peak memory",
-        "",
-        "Made by `python benchmarks/bench_deconvolve.py --write` (see its docstring). A random",
-        f"{'x'.join(map(str, SHAPE))} float32 light field (about {9*9*376*541*3*4/2**20:.0f} MiB), T = 32, d_inf = 0.",
+def _write(results, shape, out, argv):
+    """The table file, replaced as a whole."""
+    body = [
+        f"A random {'x'.join(map(str, shape))} float32 light field, T = 32, d_inf = 0.",
         "`inplane`: linear in-plane path of 2 views, one exact per-pixel solve. `tv`: linear path of 2 views",
         "with p_z from -0.5 to 0.5, primal-dual 4D-TV iterations (capped; `tol=0`).",
         "Peak memory: resident set size above the input's level on the CPU; `torch.cuda.max_memory_allocated` on a GPU.",
-        "Load avg: the machine's 1-minute load average when the case ended (other jobs inflate CPU times).",
         "",
         *HEADER,
-        *sorted(keep + [_fmt(r) for r in results]),
-        "",
+        *[_fmt(r) for r in results],
     ]
-    DOC.parent.mkdir(parents=True, exist_ok=True)
-    DOC.write_text("\n".join(lines))
-    print(f"wrote {DOC}")
+    devices = sorted({r["device"] for r in results})
+    _report.write_table(out, "deconvolve: time and peak memory", _report.command_line(__file__, argv),
+                        _report.machine(devices[-1] if devices else None), body)
 
 
 def main(argv=None):
@@ -160,8 +148,8 @@ def main(argv=None):
     ap.add_argument("--devices", nargs="+", default=None, help="cpu and/or cuda (default: cpu, plus cuda if available)")
     ap.add_argument("--cases", nargs="+", default=["inplane", "tv"])
     ap.add_argument("--tv-iterations", type=int, default=None, help="TV iterations (default 2 on CPU, 50 on CUDA)")
-    ap.add_argument("--quick", action="store_true", help="a 5x5x64x64x3 light field, writes nothing")
-    ap.add_argument("--write", action="store_true", help="write docs/benchmarks_deconvolve.md")
+    ap.add_argument("--quick", action="store_true", help="a 5x5x64x64x3 light field; writes nothing unless --out")
+    _report.add_out_argument(ap, __file__)
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     shape = (5, 5, 64, 64, 3) if args.quick else SHAPE
@@ -187,8 +175,9 @@ def main(argv=None):
             r = json.loads(line[0][7:])
             results.append(r)
             print(_fmt(r), flush=True)
-    if args.write and not args.quick and results:
-        _write(results)
+    out = _report.table_path(args.out, __file__, smoke=args.quick)
+    if out is not None and results:
+        _write(results, shape, out, argv)
     return results
 
 

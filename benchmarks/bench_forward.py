@@ -2,14 +2,15 @@
 
 Usage::
 
-    python benchmarks/bench_forward.py [--shape 9 9 376 541 3] [--n-times 16] [--device auto|cpu|cuda]
+    python benchmarks/bench_forward.py [--shape 9 9 376 541 3] [--n-times 16] [--device auto|cpu|cuda] [--out PATH]
 
 For each implementation it prints the forward time, the forward+backward
 time (loss ``0.5 ||f - b||^2``, gradients for the light field and the control
 points) and the peak memory above the baseline during forward+backward, in
 units of the light field's size. The baseline is the memory in use once the
 light field, the target and the path exist. Each implementation runs in its
-own subprocess, so peaks don't mix.
+own subprocess, so peaks don't mix. The table goes to
+``docs/benchmarks/bench_forward.md`` (or ``--out``).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import torch
 import torch.nn.functional as F
@@ -29,9 +31,12 @@ from napari_lfdeblur.blur import BlurOperator, normalized_coordinates
 from napari_lfdeblur.devices import select_device
 from napari_lfdeblur.path import bezier_positions, random_path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _report  # noqa: E402  (benchmarks/_report.py)
+
 
 def gridsample_blur(L, control_points, n_times):
-    """The MODEL.md forward model (d_inf = 0) written directly with grid_sample.
+    """The forward model of docs/model.md (d_inf = 0) written directly with grid_sample.
 
     ``L`` is (V, U, Y, X, C). Every pixel is a batch item whose (V, U) image
     is sampled at the shifted angular coordinates, once per instant.
@@ -160,6 +165,7 @@ def main(argv=None):
     parser.add_argument("--block-elements", type=int, default=None, help="block size of ours (default: per device)")
     parser.add_argument("--variants", nargs="+", default=["ours", "grid_sample"], choices=["ours", "grid_sample"])
     parser.add_argument("--variant", choices=["ours", "grid_sample"], help=argparse.SUPPRESS)
+    _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
     shape = tuple(args.shape)
     if args.variant:  # child process: one measurement, as JSON
@@ -188,6 +194,31 @@ def main(argv=None):
         print(f"speed-up of ours over grid_sample: forward {ref['forward_s'] / ours['forward_s']:.1f}x, "
               f"forward+backward {ref['forward_backward_s'] / ours['forward_backward_s']:.1f}x")
     print(f"(light field size: {rows[0]['lf_mb']:.0f} MiB)" if rows else "")
+    if rows:
+        _write(rows, shape, args, argv, device)
+
+
+def _write(rows, shape, args, argv, device):
+    """The table file: one row per implementation, then the speed-up."""
+    body = [
+        f"A random {'x'.join(map(str, shape))} float32 light field ({rows[0]['lf_mb']:.0f} MiB), "
+        f"T = {args.n_times}, loss `0.5 ||f - b||^2`, gradients for the light field and the control points; "
+        f"best of {args.repeats} runs. Peak memory: the memory in use above the light field, target and path "
+        "during forward+backward, in units of the light field's size (resident set size on the CPU, "
+        "`torch.cuda.max_memory_allocated` on a GPU). `grid_sample`: the same model written directly with "
+        "`torch.nn.functional.grid_sample` (every pixel a batch item).",
+        "",
+        "| implementation | forward (s) | forward + backward (s) | peak extra memory (x light field) |",
+        "|---|---|---|---|",
+        *[f"| {r['variant']} | {r['forward_s']:.3f} | {r['forward_backward_s']:.3f} | {r['peak_extra_x_lf']:.2f} |"
+          for r in rows],
+    ]
+    if len(rows) == 2:
+        ours, ref = rows
+        body += ["", f"Speed-up of ours over grid_sample: forward {ref['forward_s'] / ours['forward_s']:.1f}x, "
+                     f"forward + backward {ref['forward_backward_s'] / ours['forward_backward_s']:.1f}x."]
+    _report.write_table(_report.table_path(args.out, __file__), "Blur operator: speed and memory",
+                        _report.command_line(__file__, argv), _report.machine(str(device)), body)
 
 
 if __name__ == "__main__":

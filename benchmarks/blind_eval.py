@@ -1,12 +1,14 @@
-"""Evaluate blind light-field deblurring against ground truth (issue 6, "Evaluation").
+"""Evaluate blind light-field deblurring against ground truth.
 
 Cases
 -----
 - ``syn``: the synthetic layered scene ``synthetic_scene(shape=(9, 9, 128, 128),
   n_layers=3, color=True, seed=1)`` (ground-truth disparities 0.25..1.5 px/view);
 - ``lytro``: the real Lytro crop shipped with the package, ``lytro_sample()``
-  (9 x 9 x 128 x 128 x 3, views 2..10 and the central 128 x 128 pixels of
-  ``/work/shared/data/lytro-f01-img0001``);
+  (9 x 9 x 128 x 128 x 3, views 2..10 and the central 128 x 128 pixels of the
+  Lytro capture ``IMG_0001``);
+- more scenes (``syn2`` .. ``syn5``: other seeds; ``lytro2`` .. ``lytro5``: the
+  four corners of the same capture, read from ``LYTRO_CAPTURE``);
 
 each blurred by the fixed random paths of ``PATHS`` (``random_path`` with
 fixed seeds, in-plane and with some ``z``), rendered with ``T = 128`` instants
@@ -15,8 +17,8 @@ clipped to [0, 1]. ``d_inf = 0`` for rendering and solving.
 
 Ground truth
 ------------
-Each true path is moved to the zero-mean gauge for ``T = 128`` (MODEL.md,
-"Gauge of results"), so the ground-truth restored light field is the sharp
+Each true path is moved to the zero-mean gauge for ``T = 128`` (docs/model.md,
+"Gauge"), so the ground-truth restored light field is the sharp
 light field itself (the view from the mean camera position).
 
 Methods
@@ -24,13 +26,13 @@ Methods
 - ``default`` and ``paper``: ``blind_deblur`` with those presets (skipped, and
   marked so, when ``napari_lfdeblur.blind`` cannot be imported);
 - ``baseline2d``: every view deblurred on its own by the L0-gradient 2D blind
-  deconvolution of ``napari_lfdeblur._baseline2d`` (no path estimate);
+  deconvolution of ``benchmarks/_baseline2d.py`` (no path estimate);
 - ``camera`` (only when asked for): ``default`` told how much softer the
   camera's views are along x than along y (``edge_anisotropy``, from
   ``CAMERA_EDGE_ANISOTROPY``): knowledge of the camera that a blind method
   does not have, so it is not the headline, and it shows what the isotropic
-  edge model costs on the Lytro crops (docs/blind.md, "The Lytro views are
-  softer along x").
+  edge model costs on the Lytro crops (docs/blind.md, "Cameras whose views
+  are softer along one axis").
 
 Metrics (``napari_lfdeblur.metrics``), spatial borders of ``CROP`` px removed:
 PSNR, SSIM, angular error (RMSE of the differences between neighbouring
@@ -42,9 +44,9 @@ resident set size above the level before the call (sampled every 10 ms), or
 
 Usage::
 
-    python benchmarks/blind_eval.py                       # full run, writes docs/blind_eval.md
+    python benchmarks/blind_eval.py                       # full run, writes docs/benchmarks/blind_eval.md
     python benchmarks/blind_eval.py --quick               # tiny smoke run, writes nothing
-    python benchmarks/blind_eval.py --methods baseline2d --cases syn-p1,lytro-p2
+    python benchmarks/blind_eval.py --methods baseline2d --cases syn-p1,lytro-p2 --out /tmp/eval.md
     python benchmarks/blind_eval.py --device cuda
 """
 
@@ -54,7 +56,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import resource
 import sys
 import threading
@@ -65,8 +66,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_OUTPUT = ROOT / "docs" / "blind_eval.md"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _report  # noqa: E402  (benchmarks/_report.py)
+
+ROOT = _report.ROOT
+DEFAULT_OUTPUT = _report.default_table(__file__)
 
 RENDER_TIMES = 128  # instants of the ground-truth blur
 NOISE_SIGMA = 0.002
@@ -87,34 +91,25 @@ PATHS = {
     "p1": (4, 2.0, 0.0, 101),
     "p2": (4, 3.0, 0.0, 102),
     "p3": (4, 2.5, 0.5, 103),
-    # held out in the second development session; looked at in the third
     "p4": (4, 2.5, 0.0, 104),
     "p5": (4, 2.0, 0.3, 105),
-    # added at the end of the third session and run once; looked at in the fourth
     "p6": (4, 2.5, 0.0, 106),
     "p7": (4, 2.5, 0.4, 107),
-    # fresh: added in the fourth session before any run on them, never used to choose settings
     "p8": (4, 2.5, 0.0, 108),
     "p9": (4, 2.0, 0.4, 109),
-    # fresh in the sixth session: added before any run on them, to check `default` and `camera`
-    # on cases no setting was chosen on
     "p10": (4, 2.5, 0.0, 110),
     "p11": (4, 2.0, 0.4, 111),
 }
 
-#: cases used while developing the solver, in the order they were added: development cases;
-#: held-out cases (scenes ``syn2`` and ``lytro2``, paths ``p4`` and ``p5``), not used to choose
-#: settings in the second session but measured while developing the third; the third session's
-#: fresh cases (``syn3``, ``lytro3``, paths ``p6``, ``p7``), run once then, measured while
-#: developing the fourth; fresh cases (``syn4``, ``lytro4``, paths ``p8``, ``p9``), run only to
-#: report. The report gives the means of each group.
-DEV_CASES = [f"{s}-{p}" for s in ("syn", "lytro") for p in ("p1", "p2", "p3")]
-HELD_OUT_CASES = [f"{s}-{p}" for s in ("syn2", "lytro2") for p in ("p4", "p5")]
-SEEN_CASES = [f"{s}-{p}" for s in ("syn3", "lytro3") for p in ("p6", "p7")]
-FRESH_CASES = [f"{s}-{p}" for s in ("syn4", "lytro4") for p in ("p8", "p9")]
-FRESH6_CASES = [f"{s}-{p}" for s in ("syn5", "lytro5") for p in ("p10", "p11")]
-#: the full Lytro capture the ``lytro2`` crop comes from (beside the repository; the environment
-#: variable LFDEBLUR_LYTRO_CAPTURE overrides)
+#: the cases: each scene with its paths (scene ``syn`` and ``lytro`` with ``p1``..``p3``, ``syn2`` and
+#: ``lytro2`` with ``p4``, ``p5``, ...), eleven synthetic and eleven Lytro ones
+CASES = [f"{s}{n}-{p}" for n, paths in (("", ("p1", "p2", "p3")), ("2", ("p4", "p5")), ("3", ("p6", "p7")),
+                                        ("4", ("p8", "p9")), ("5", ("p10", "p11")))
+         for s in ("syn", "lytro") for p in paths]
+#: scene families, whose means the summary gives apart
+FAMILIES = {"synthetic": "syn", "Lytro": "lytro"}
+#: the full Lytro capture the ``lytro2`` .. ``lytro5`` crops come from, a folder of views (the
+#: environment variable LFDEBLUR_LYTRO_CAPTURE overrides)
 LYTRO_CAPTURE = Path(os.environ.get("LFDEBLUR_LYTRO_CAPTURE", ROOT.parent / "shared" / "data" / "lytro-f01-img0001"))
 #: the capture's names are IMG_0001_KKK_RR_CC.png with RR the horizontal view index
 LYTRO_PATTERN = r"_(?P<col>\d+)_(?P<row>\d+)\.png$"
@@ -198,11 +193,8 @@ def make_case(name: str, quick: bool = False) -> Case:
 def case_names(quick: bool) -> list[str]:
     if quick:
         return ["syn-p2"]
-    names = list(DEV_CASES)
-    for c in HELD_OUT_CASES + SEEN_CASES + FRESH_CASES + FRESH6_CASES:
-        if LYTRO_CAPTURE.is_dir() or not c.startswith("lytro"):  # the capture is beside the repository
-            names.append(c)
-    return names
+    # lytro2..lytro5 need the capture; `syn` and `lytro` are built in
+    return [c for c in CASES if c.startswith("syn") or c.split("-")[0] == "lytro" or LYTRO_CAPTURE.is_dir()]
 
 
 # ------------------------------------------------------------ measurement
@@ -292,7 +284,7 @@ def method_available(method: str) -> tuple[bool, str]:
 def run_method(method: str, case: Case, device: str, quick: bool):
     """Run one method; returns (restored light field, control points or None, extra info)."""
     if method == "baseline2d":
-        from napari_lfdeblur._baseline2d import Baseline2DParams, deblur_views_2d
+        from _baseline2d import Baseline2DParams, deblur_views_2d  # benchmarks/_baseline2d.py
 
         params = Baseline2DParams(kernel_size=7) if quick else Baseline2DParams()
         restored, _ = deblur_views_2d(case.blurred, params)
@@ -411,14 +403,18 @@ def _mean(rows, key):
     return float(np.mean(vals)) if vals else None
 
 
+def _family(case: str) -> str:
+    """The scene family of a case: ``'syn'`` for ``syn3-p6``, ``'lytro'`` for ``lytro-p1``."""
+    return case.split("-")[0].rstrip("0123456789")
+
+
 def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
     """One mean row per method (and for the input), over the cases it ran on."""
     out = []
     groups = [("", lambda c: True)]
-    if any(r["case"] not in DEV_CASES for r in rows):
-        groups += [(" dev", lambda c: c in DEV_CASES), (" held-out", lambda c: c in HELD_OUT_CASES),
-                   (" fresh in session 3", lambda c: c in SEEN_CASES), (" fresh", lambda c: c in FRESH_CASES),
-                   (" fresh in session 6", lambda c: c in FRESH6_CASES)]
+    families = {label: prefix for label, prefix in FAMILIES.items() if any(_family(r["case"]) == prefix for r in rows)}
+    if len(families) > 1:
+        groups += [(f" {label}", lambda c, prefix=prefix: _family(c) == prefix) for label, prefix in families.items()]
     for (label, keep), method in ((g, m) for g in groups for m in ["input (blurred)", *methods]):
         sel = [r for r in rows if r["method"] == method and "error" not in r and "skipped" not in r and keep(r["case"])]
         if not sel:
@@ -488,91 +484,62 @@ def targets(means: list[dict], quick: bool, rows: list[dict] | None = None) -> l
 METHOD_TEXT = """\
 ## How the figures are made
 
-`benchmarks/blind_eval.py` (this file is its output; rerun it to refresh).
-
-- **Cases.** `syn`: `synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=1)`,
-  layered textured planes at disparities 0.25..1.5 px/view with occlusions. `lytro`: the real Lytro
-  crop `lytro_sample()` (9×9×128×128×3; its content moves about 0.63 px/view). Its views, and those of
-  the other Lytro crops below, are laid out as MODEL.md says (u moves the image along x): the
-  capture's file names give the horizontal view index first, and before the fifth session the
-  package read them as named, so the Lytro cases of earlier reports were the same crops with their
-  view axes swapped (`views_transposed`; docs/io.md). Each is blurred by three
-  fixed random cubic Bézier paths (`random_path(4, seed=101..103)`, scaled so that the largest distance
-  between two positions is 2 views for `p1`, 3 for `p2` and 2.5 for `p3`, which also moves in z),
-  rendered with **T = 128** instants — far more than a
-  solver uses — with `d_inf = 0`, plus Gaussian noise σ = 0.002 (seeded), clipped to [0, 1].
-- **Held-out cases**: `syn2`, the synthetic scene with
-  `seed=2`, and `lytro2`, the top-left 128×128 pixels of the same Lytro capture (the `lytro` crop is
-  pixels 64..191, so a quarter of `lytro2` overlaps it), views 2..10, each blurred by `p4`
-  (`random_path(4, seed=104)`, 2.5 views, in-plane) and `p5` (`seed=105`, 2 views, with z). They
-  were not used to choose settings in the second development session, but the third session's
-  changes were measured on them too, so they are no longer strictly held out.
-- **Fresh in session 3**: `syn3` (`seed=3`) and `lytro3`, the bottom-right 128×128 pixels of the
-  capture, views 2..10, each blurred by `p6` (`seed=106`, 2.5 views, in-plane) and `p7`
-  (`seed=107`, 2.5 views, with z). Added at the end of the third session and run once for its
-  report; the fourth session measured its changes on them too.
-- **Fresh cases**, added in the fourth session before any run on them, and run only for this
-  report: `syn4` (`seed=4`) and `lytro4`, the top-right 128×128 pixels of the capture (a quarter
-  overlaps the `lytro` crop), views 2..10, each blurred by `p8` (`seed=108`, 2.5 views, in-plane)
-  and `p9` (`seed=109`, 2 views, with z).
-- **Fresh in session 6**, added in the sixth session before any run on them: `syn5` (`seed=5`)
-  and `lytro5`, the bottom-left 128×128 pixels of the capture (a quarter overlaps the `lytro`
-  crop), views 2..10, each blurred by `p10` (`seed=110`, 2.5 views, in-plane) and `p11`
-  (`seed=111`, 2 views, with z). The summary gives the means over all cases and over each
-  group.
+- **Scenes.** `syn`: `synthetic_scene(shape=(9, 9, 128, 128), n_layers=3, color=True, seed=1)`,
+  layered textured planes at disparities 0.25..1.5 px/view with occlusions; `syn2` .. `syn5` the
+  same with `seed=2..5`. `lytro`: the real Lytro crop `lytro_sample()` (9×9×128×128×3, its content
+  at about 0.63 px/view); `lytro2` .. `lytro5`: the top-left, bottom-right, top-right and bottom-left
+  128×128 pixels of the same capture, views 2..10, read with the horizontal view index first (as
+  its file names give it; docs/io.md, "View order").
+- **Paths.** Fixed random cubic Bézier paths `random_path(4, seed=100 + k)` for `pk`, scaled so that
+  the largest distance between two positions is 2 to 3 views; `p3`, `p5`, `p7`, `p9` and `p11`
+  also move in z. Each scene is blurred by two or three of them (`syn-p1`, `syn-p2`, `syn-p3`,
+  `syn2-p4`, `syn2-p5`, ...), rendered with **T = 128** instants (far more than a solver uses) with
+  `d_inf = 0`, plus Gaussian noise σ = 0.002 (seeded), clipped to [0, 1]. The summary gives the
+  means over all cases and over each scene family.
 - **Ground truth.** The true path is moved to the zero-mean gauge for T = 128, so the ground-truth
-  light field is the sharp one seen from the mean camera position (MODEL.md, "Gauge of results").
+  light field is the sharp one seen from the mean camera position (docs/model.md, "Gauge").
 - **Image metrics** (`napari_lfdeblur.metrics`), with {crop} border pixels cropped in y and x:
   PSNR over all views and channels; SSIM, the mean over views and channels of scikit-image's SSIM
   (7×7 window); **angular error**, the RMSE between the differences of neighbouring views
   (`l[v, u+1] - l[v, u]`, `l[v+1, u] - l[v, u]`) of the estimate and of the ground truth. It measures
   angular consistency: independent per-view processing leaves each view its own residual blur, shift
   and ringing, which shows up in these differences even when every view looks sharp. Lower is better.
-- **Path metrics**, both paths sampled at 64 instants and moved to zero mean (FINDINGS.md §3):
-  **blur mismatch** `||B(l, p_est) - B(l, p_true)|| / ||B(l, p_true) - l||` on the ground-truth light
-  field (0 is perfect, 1 is as bad as assuming no motion); **Chamfer** distance between the two sets of
-  positions, in views (blind to time order); **rel. RMSE**, the pointwise RMSE for the better time
-  direction divided by the true path's extent (reported, not optimised for). The input row shows the
-  path errors of "no motion" (the zero path).
+- **Path metrics**, both paths sampled at 64 instants and moved to zero mean (docs/model.md,
+  "Judging an estimate"): **blur mismatch** `||B(l, p_est) - B(l, p_true)|| / ||B(l, p_true) - l||`
+  on the ground-truth light field (0 is perfect, 1 is as bad as assuming no motion); **Chamfer**
+  distance between the two sets of positions, in views (blind to time order); **rel. RMSE**, the
+  pointwise RMSE for the better time direction divided by the true path's extent (reported, not
+  optimised for). The input row shows the path errors of "no motion" (the zero path).
 - **Methods.** `default` and `paper`: `blind_deblur` with those presets, given only the blurred light
-  field and `d_inf`. `baseline2d`: each view deblurred on its own by a compact L0-gradient blind
-  deconvolution (Xu et al. 2013 / Pan et al. 2014 style; `napari_lfdeblur/_baseline2d.py`):
-  coarse-to-fine kernel estimation (11×11 kernel, pyramid factor √2) alternating an L0-gradient latent
-  update (half-quadratic splitting, FFT) with a gradient-domain least-squares kernel update (conjugate
-  gradients, non-negative, thresholded, sum 1, re-centred on its centroid), then a non-blind
-  Wiener filter with a gradient prior (`min ||k*x - y||² + 0.05 ||∇x||²`) per colour channel. Its free
-  parameters (kernel size, L0 weight 1e-2, final step and weight; TV was tried too) were set on light fields not in this table (synthetic scene seed 0 and the Lytro sample, blurred
-  by path seed 50). One spatially uniform kernel per view cannot follow the light field's blur,
-  which scales with disparity and flips with its sign; that is the point of the comparison. It
-  estimates no camera path.
+  field and `d_inf`. `camera`: `default` with `edge_anisotropy=0.6` on the Lytro cases (how much
+  softer the capture's views are along x; knowledge a blind method does not have). `baseline2d`:
+  each view deblurred on its own by a compact L0-gradient blind deconvolution (Xu et al. 2013 /
+  Pan et al. 2014 style; `benchmarks/_baseline2d.py`): coarse-to-fine kernel estimation (11×11
+  kernel, pyramid factor √2) alternating an L0-gradient latent update (half-quadratic splitting,
+  FFT) with a gradient-domain least-squares kernel update (conjugate gradients, non-negative,
+  thresholded, sum 1, re-centred on its centroid), then a non-blind Wiener filter with a gradient
+  prior (`min ||k*x - y||² + 0.05 ||∇x||²`) per colour channel. Its free parameters were set on light
+  fields not in this table (synthetic scene seed 0 and the Lytro sample, blurred by path seed 50).
+  One spatially uniform kernel per view cannot follow the light field's blur, which scales with
+  disparity and flips with its sign; that is the point of the comparison. It estimates no camera
+  path.
 - **Time** is the wall-clock time of the method call. **Peak memory** is the peak resident set size
   above the level before the call, sampled every 10 ms (CPU), or `torch.cuda.max_memory_allocated`
   (GPU).
 """
 
 
-def _loadavg() -> str:
-    try:
-        return "{:.1f}".format(os.getloadavg()[0])
-    except (AttributeError, OSError):
-        return "n/a"
-
-
 def render(rows, means, methods, skipped, args, env) -> str:
-    lines = ["# Blind deblurring: evaluation against ground truth", ""]
+    lines = ["# Blind deblurring: evaluation against ground truth", "",
+             f"Command: `{env['command']}`", "", f"Machine: {env['machine']}", ""]
     if args.quick:
         lines += ["**Quick smoke run at tiny sizes: not the benchmark.**", ""]
     lines += [
-        f"Run on {env['machine']}, device `{env['device']}`, torch {env['torch']}, "
-        f"{env['threads']} torch threads, {env['date']}. Command: `` {env['command']} ``. "
-        f"1-minute load average {env['load_start']} at the start and {env.get('load_end', 'n/a')} at the end "
-        "(other work on the machine slows the timings).",
-        "",
         "## Summary (means over the cases)",
         "",
         *_table(means),
         "",
-        "## Targets (issue 6, CPU)",
+        "## Targets (CPU)",
         "",
         *targets(means, args.quick, rows),
         "",
@@ -601,7 +568,6 @@ def render(rows, means, methods, skipped, args, env) -> str:
 
 def write(rows, run, methods, skipped, args, env, output, *, final, n_done=0, n_all=0):
     """Render the report; print and write it (and the JSON) when final, only write it when partial."""
-    env["load_end"] = _loadavg()
     means = summarise(rows, run)
     text = render(rows, means, methods, skipped, args, env)
     if not final:
@@ -633,10 +599,7 @@ def main(argv=None) -> int:
         help="run METHOD only on these cases (e.g. a slow preset on a subset); repeatable",
     )
     ap.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
-    ap.add_argument(
-        "--output",
-        help=f"markdown file to write (default {DEFAULT_OUTPUT.relative_to(ROOT)} for a full run, none for --quick)",
-    )
+    _report.add_out_argument(ap, __file__, "--output")
     ap.add_argument("--json", help="also write every row as JSON here")
     ap.add_argument("--note", action="append", default=[], help="a line of text for the report; repeatable")
     args = ap.parse_args(argv)
@@ -646,7 +609,7 @@ def main(argv=None) -> int:
     if bad:
         ap.error(f"unknown method(s) {bad}; choose from {ALL_METHODS}")
     names = [c.strip() for c in args.cases.split(",")] if args.cases else case_names(args.quick)
-    output = Path(args.output) if args.output else (None if args.quick else DEFAULT_OUTPUT)
+    output = _report.table_path(args.out, __file__, smoke=args.quick)
     only = {}
     for spec in args.cases_for:
         method, sep, cases = spec.partition("=")
@@ -660,16 +623,12 @@ def main(argv=None) -> int:
 
     device = str(select_device(args.device))
     env = {
-        "machine": f"{platform.machine()} with {os.cpu_count()} CPUs",
+        "machine": _report.machine(device),
         "device": device,
         "torch": torch.__version__,
         "threads": torch.get_num_threads(),
-        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-        "command": "python benchmarks/blind_eval.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "load_start": _loadavg(),
+        "command": _report.command_line(__file__, argv),
     }
-    if device.startswith("cuda"):
-        env["machine"] += ", " + torch.cuda.get_device_name(0)
 
     skipped = {}
     for m in methods:

@@ -10,7 +10,7 @@ wrong everywhere else, and more so the longer the blur.
 
 For each blur length ``L`` (views) of a linear in-plane path at 30 degrees:
 
-- blur the sharp light field (MODEL.md forward model, T = 32), add Gaussian
+- blur the sharp light field (the forward model of docs/model.md, T = 32), add Gaussian
   noise (sigma = 0.005, seeded), or none;
 - **4D**: ``deconvolve(method='inplane')``, the exact per-pixel solve
   (weight 0 without noise);
@@ -28,14 +28,15 @@ For each blur length ``L`` (views) of a linear in-plane path at 30 degrees:
 Usage::
 
     python benchmarks/in_plane_experiment.py --tv       # writes docs/images/in_plane_experiment.png
-                                                         # and docs/in_plane_experiment.md (as committed)
-    python benchmarks/in_plane_experiment.py            # the same without the 4D TV runs (about 30 s)
-    python benchmarks/in_plane_experiment.py --quick    # small smoke run, writes nothing
+                                                         # and docs/benchmarks/in_plane_experiment.md
+    python benchmarks/in_plane_experiment.py            # the same without the 4D TV runs
+    python benchmarks/in_plane_experiment.py --quick    # small smoke run, writes nothing (or the table to --out)
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -44,6 +45,9 @@ from skimage import restoration
 
 from napari_lfdeblur import deconvolve, linear_path, lytro_sample, refocus, simulate_blur, synthetic_scene
 from napari_lfdeblur.special_cases import inplane_psf
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _report  # noqa: E402  (benchmarks/_report.py)
 
 ROOT = Path(__file__).resolve().parents[1]
 LENGTHS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)
@@ -122,7 +126,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes, writes nothing")
     ap.add_argument("--tv", action="store_true",
-                    help="add 4D TV runs at a few blur lengths (about 10 min on 2 loaded cores instead of 30 s)")
+                    help="add 4D TV runs at a few blur lengths (much slower)")
+    _report.add_out_argument(ap, __file__)
     args = ap.parse_args(argv)
     if args.quick:
         syn, disp = synthetic_scene((5, 5, 32, 32), seed=1)
@@ -140,13 +145,15 @@ def main(argv=None):
     for name, lf, d in cases:
         print(f"{name}: {lf.shape}, 2D PSF for disparity {d:.3f} px/view")
         rows += run_case(name, lf, d, lengths, tv=args.tv)
-    if args.quick:
-        return rows
-    _write(rows, cases)
+    out = _report.table_path(args.out, __file__, smoke=args.quick)
+    if not args.quick:
+        _figure(rows, cases)
+    if out is not None:
+        _table(rows, out, argv)
     return rows
 
 
-def _write(rows, cases):
+def _figure(rows, cases):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -178,19 +185,21 @@ def _write(rows, cases):
     out_png = ROOT / "docs" / "images" / "in_plane_experiment.png"
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png, dpi=110)
+    print(f"wrote {out_png}")
+
+
+def _table(rows, out, argv):
     lines = [
-        "# In-plane experiment: 4D versus 2D deconvolution",
-        "",
-        "Made by `python benchmarks/in_plane_experiment.py --tv` (see its docstring for the protocol).",
+        "The protocol is in the script's docstring.",
         "Linear in-plane path at 30 degrees, T = 32; RMSE of the centre view against the sharp one,",
         f"borders of {CROP} px removed. Noise-free: 4D is the exact solve (weight 0), 2D the best Wiener",
         f"balance. With noise sigma = {NOISE}: each method with its best weight from a small grid.",
         "",
-        "![in-plane experiment](images/in_plane_experiment.png)",
+        "![in-plane experiment](../images/in_plane_experiment.png)",
         "",
-        f"4D TV: `method='tv'`, weight {TV_WEIGHT}, {TV_ITERATIONS} iterations from the in-plane solve, "
-        f"at blur lengths {', '.join(map(str, TV_LENGTHS))}.",
-        "",
+        *([f"4D TV: `method='tv'`, weight {TV_WEIGHT}, {TV_ITERATIONS} iterations from the in-plane solve, "
+           f"at blur lengths {', '.join(map(str, TV_LENGTHS))}.", ""] if any("rmse_tv" in r for r in rows) else
+          ["4D TV: not run (`--tv` adds it).", ""]),
         "| case | blur length (views) | blurred | 2D noise-free | 4D noise-free | "
         f"blurred + noise | 2D, noise {NOISE} | 4D, noise {NOISE} | 4D TV, noise {NOISE} | 4D weight | 2D balance |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
@@ -202,8 +211,8 @@ def _write(rows, cases):
             f"{r['rmse_4d_clean']:.1e} | {r['blurred_noisy']:.4f} | {r['rmse_2d']:.4f} | {r['rmse_4d']:.4f} | "
             f"{tv} | {r['weight_4d']:g} | {r['balance_2d']:g} |"
         )
-    (ROOT / "docs" / "in_plane_experiment.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out_png} and docs/in_plane_experiment.md")
+    _report.write_table(out, "In-plane experiment: 4D versus 2D deconvolution", _report.command_line(__file__, argv),
+                        _report.machine("cpu"), lines)
 
 
 if __name__ == "__main__":

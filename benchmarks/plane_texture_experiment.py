@@ -2,7 +2,7 @@
 
 A fronto-parallel plane at disparity ``d`` (9 x 9 x 96 x 96 views of a
 smoothed-noise texture) is blurred by linear out-of-plane motion (``p_z``
-from ``-Z/2`` to ``Z/2``, MODEL.md forward model, T = 32).
+from ``-Z/2`` to ``Z/2``, the forward model of docs/model.md, T = 32).
 ``recover_plane_texture`` (no path given; the disparity estimated too) takes
 the refocused slice and applies the ``1 + ζ |Ω|`` correction. Scores are
 RMSEs against the sharp centre view inside ``valid_radius = d (U - 1) / 2``
@@ -12,17 +12,23 @@ aperture (see the function's docstring).
 Usage::
 
     python benchmarks/plane_texture_experiment.py     # writes docs/images/plane_texture.png
-                                                       # and docs/plane_texture_experiment.md
+                                                       # and docs/benchmarks/plane_texture_experiment.md
+    python benchmarks/plane_texture_experiment.py --out table.md --no-figure
 """
 
 from __future__ import annotations
 
+import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 
 from napari_lfdeblur import linear_path, recover_plane_texture, simulate_blur
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _report  # noqa: E402  (benchmarks/_report.py)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHAPE = (9, 9, 96, 96)
@@ -45,12 +51,19 @@ def plane_lightfield(shape, d, seed=0):
     return lf
 
 
-def main():
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    _report.add_out_argument(ap, __file__)
+    ap.add_argument("--no-figure", action="store_true", help="write the table only, not docs/images/plane_texture.png")
+    ap.add_argument("--cases", type=int, nargs="+", default=None, metavar="I",
+                    help="indices into CASES to run (default: all; the figure needs case 2)")
+    args = ap.parse_args(argv)
+    cases = CASES if args.cases is None else [CASES[i] for i in args.cases]
     V, U, Y, X = SHAPE
     yy, xx = np.mgrid[0:Y, 0:X]
     rr = np.hypot(yy - (Y - 1) / 2, xx - (X - 1) / 2)
     rows, shown = [], None
-    for d, Z in CASES:
+    for d, Z in cases:
         lf = plane_lightfield(SHAPE, d, seed=1)
         blurred = simulate_blur(lf, linear_path(0.0, z=Z), n_times=32)
         truth = lf[V // 2, U // 2]
@@ -67,6 +80,26 @@ def main():
         if (d, Z) == (2.0, 8.0):
             shown = (truth, blurred[V // 2, U // 2], res, disc)
 
+    if not args.no_figure and shown is not None:
+        _figure(shown)
+    lines = [
+        "9x9x96x96 plane, linear out-of-plane",
+        "motion p_z in [-Z/2, Z/2], T = 32, no noise; `recover_plane_texture` without the path or the disparity.",
+        "RMSE against the sharp centre view within the valid radius d (U-1)/2 of the centre.",
+        "",
+        "![plane texture](../images/plane_texture.png)",
+        "",
+        "| d (px/view) | Z | estimated d | valid radius (px) | ζ | blurred centre view | refocused slice | recovered |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    lines += ["| {:.1f} | {:.0f} | {:.3f} | {:.0f} | {:.2f} | {:.4f} | {:.4f} | {:.4f} |".format(*r) for r in rows]
+    _report.write_table(_report.table_path(args.out, __file__),
+                        "Out-of-plane motion of a textured plane: recovery by refocusing",
+                        _report.command_line(__file__, argv), _report.machine("cpu"), lines)
+
+
+def _figure(shown):
+    V, U, Y, X = SHAPE
     import matplotlib
 
     matplotlib.use("Agg")
@@ -91,21 +124,7 @@ def main():
     fig.tight_layout()
     out = ROOT / "docs" / "images" / "plane_texture.png"
     fig.savefig(out, dpi=100)
-    lines = [
-        "# Out-of-plane motion of a textured plane: recovery by refocusing",
-        "",
-        "Made by `python benchmarks/plane_texture_experiment.py`. 9x9x96x96 plane, linear out-of-plane",
-        "motion p_z in [-Z/2, Z/2], T = 32, no noise; `recover_plane_texture` without the path or the disparity.",
-        "RMSE against the sharp centre view within the valid radius d (U-1)/2 of the centre.",
-        "",
-        "![plane texture](images/plane_texture.png)",
-        "",
-        "| d (px/view) | Z | estimated d | valid radius (px) | ζ | blurred centre view | refocused slice | recovered |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    lines += ["| {:.1f} | {:.0f} | {:.3f} | {:.0f} | {:.2f} | {:.4f} | {:.4f} | {:.4f} |".format(*r) for r in rows]
-    (ROOT / "docs" / "plane_texture_experiment.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out} and docs/plane_texture_experiment.md")
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""The code blocks of docs/headless.md run as written.
+"""The code blocks of docs/headless.md and of the README's API section run as written.
 
 Blocks that import napari run in one subprocess (a viewer per block, closed by
 the block); the others run here. Run under xvfb for the napari blocks:
@@ -25,9 +25,9 @@ README = DOC.parents[1] / "README.md"
 
 
 def _blocks():
-    """The blocks of headless.md, then those of the README's napari section."""
+    """The blocks of headless.md, then those of the README's API section."""
     readme = README.read_text()
-    start = readme.find("## Using it in napari")
+    start = readme.find("## Python API")
     section = readme[start: readme.find("\n## ", start + 5)] if start >= 0 else ""
     return BLOCK.findall(DOC.read_text()) + BLOCK.findall(section)
 
@@ -45,14 +45,15 @@ def test_the_doc_has_both_kinds_of_example():
 
 
 @pytest.mark.parametrize("index", range(len(_core_blocks())))
-def test_core_example_runs(index):
+def test_core_example_runs(index, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # examples may write files
     code = _core_blocks()[index]
     if "blind" in code:
         pytest.importorskip("napari_lfdeblur.blind")
     exec(compile(code, f"{DOC.name}[core {index}]", "exec"), {"__name__": "__doc_example__"})
 
 
-def test_viewer_examples_run():
+def test_viewer_examples_run(tmp_path):
     pytest.importorskip("napari")
     if not os.environ.get("DISPLAY") and os.environ.get("QT_QPA_PLATFORM") != "offscreen":
         pytest.skip("needs a display: run under xvfb-run")
@@ -66,6 +67,7 @@ def test_viewer_examples_run():
             print(f"block {{i}} ok", flush=True)
         """
     ).format(blocks=blocks)
-    proc = subprocess.run([sys.executable, "-c", runner], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([sys.executable, "-c", runner], capture_output=True, text=True, timeout=300,
+                          cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-6000:]
     assert proc.stdout.count(" ok") == len(blocks)

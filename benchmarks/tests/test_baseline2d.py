@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 from skimage import data, transform
 
-from napari_lfdeblur._baseline2d import (
+from _baseline2d import (  # benchmarks/_baseline2d.py, on the path by conftest.py
     Baseline2DParams,
     blind_deconv_2d,
     conv2_circular,

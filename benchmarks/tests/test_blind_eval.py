@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "blind_eval.py"
+SCRIPT = Path(__file__).resolve().parents[1] / "blind_eval.py"
 
 
 @pytest.fixture(scope="module")
@@ -100,26 +100,23 @@ def test_summary_skips_failures_and_nan(blind_eval):
     assert mean["case"] == "**mean of 2**"
 
 
-def test_summary_gives_held_out_means_apart(blind_eval):
-    held = blind_eval.HELD_OUT_CASES[0]
-    seen = blind_eval.SEEN_CASES[0]
-    fresh = blind_eval.FRESH_CASES[0]
+def test_summary_gives_scene_family_means_apart(blind_eval):
     rows = [
         {"case": "syn-p1", "method": "default", "gain": 6.0},
-        {"case": "syn-p2", "method": "default", "gain": 4.0},
-        {"case": held, "method": "default", "gain": 2.0},
-        {"case": seen, "method": "default", "gain": 1.0},
-        {"case": fresh, "method": "default", "gain": 0.0},
+        {"case": "syn2-p4", "method": "default", "gain": 4.0},
+        {"case": "lytro-p1", "method": "default", "gain": 2.0},
+        {"case": "lytro3-p6", "method": "default", "gain": 1.0},
+        {"case": "lytro4-p8", "method": "default", "gain": 0.0},
     ]
     means = {m["group"]: m for m in blind_eval.summarise(rows, ["default"])}
     assert means["all"]["gain"] == pytest.approx(2.6) and means["all"]["case"] == "**mean of 5**"
-    assert means["dev"]["gain"] == pytest.approx(5.0)
-    assert means["held-out"]["gain"] == pytest.approx(2.0) and means["held-out"]["case"] == "**mean of 1 held-out**"
-    assert means["fresh in session 3"]["gain"] == pytest.approx(1.0)
-    assert means["fresh"]["gain"] == pytest.approx(0.0) and means["fresh"]["case"] == "**mean of 1 fresh**"
-    groups = [set(blind_eval.DEV_CASES), set(blind_eval.HELD_OUT_CASES), set(blind_eval.SEEN_CASES),
-              set(blind_eval.FRESH_CASES), set(blind_eval.FRESH6_CASES)]
-    assert sum(len(g) for g in groups) == len(set.union(*groups))  # disjoint
+    assert means["synthetic"]["gain"] == pytest.approx(5.0)
+    assert means["Lytro"]["gain"] == pytest.approx(1.0) and means["Lytro"]["case"] == "**mean of 3 Lytro**"
+    # one family only: no family means beside the overall one
+    assert [m["group"] for m in blind_eval.summarise(rows[:2], ["default"])] == ["all"]
+    cases = blind_eval.CASES
+    assert len(cases) == len(set(cases)) == 22
+    assert sum(blind_eval._family(c) == "syn" for c in cases) == sum(blind_eval._family(c) == "lytro" for c in cases)
 
 
 def test_peak_memory_sees_an_allocation(blind_eval):

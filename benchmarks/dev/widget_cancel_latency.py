@@ -6,7 +6,7 @@ solver is at different pyramid levels or in its final stage), and prints how
 long the worker took to stop, the stage it was in, and the layers left (only
 the input, if no partial layer was added).
 
-    xvfb-run -a .venv/bin/python benchmarks/widget_cancel_latency.py [--device cuda] [--waits 3 20 45]
+    xvfb-run -a .venv/bin/python benchmarks/dev/widget_cancel_latency.py [--device cuda] [--waits 3 20 45]
 """
 
 from __future__ import annotations

@@ -4,14 +4,14 @@ For each case, a salient-edge latent is computed *at the true path* (three
 half-quadratic splitting solves, ``lambda`` 4e-3, 2e-3, 1e-3, as the first
 alternations do), with the edge model ``K_p G_sigma`` for each ``sigma`` given.
 The path is then fitted to that latent, from the true path and from 300 random
-starts, and the blur mismatch (FINDINGS.md, section 3) of the fit started at the
+starts, and the blur mismatch (docs/model.md) of the fit started at the
 truth and of the best fit is printed. With the true sharp light field as the
 latent both are 0.02 to 0.05, so what this prints is the latent's share of the
-path error. docs/blind.md ("The edge model, switched on late") quotes its figures.
+path error (docs/blind.md, "The alternating method", the edge model).
 
 Usage::
 
-    python benchmarks/blind_latent_at_true_path.py [--cases syn-p1,lytro-p1,lytro2-p4] [--sigmas 0,0.3,0.5,0.8]
+    python benchmarks/dev/blind_latent_at_true_path.py [--cases syn-p1,lytro-p1,lytro2-p4] [--sigmas 0,0.3,0.5,0.8]
 
 In-plane cases only (the true path's ``p_z`` is dropped for the latent).
 """

@@ -2,8 +2,8 @@
 
 This is the comparison the paper makes: deblur every sub-aperture view on its
 own with a good single-image blind method, ignoring the light field's angular
-structure. It is private (not part of the public API) and used by
-``benchmarks/blind_eval.py``; numpy and scipy FFTs only.
+structure. It lives beside ``benchmarks/blind_eval.py``, which uses it, and is
+not part of the package; numpy and scipy FFTs only.
 
 Method, per view (kernel estimated on grayscale, applied to every channel):
 

@@ -8,7 +8,7 @@ redraws of the plots and path preview, and the time Qt's thread spent showing
 progress. The redraws hold Python's lock, so on a machine with few cores they
 slow the solver down; the widget spaces them by their own cost.
 
-    xvfb-run -a .venv/bin/python benchmarks/widget_overhead.py [--crop 64] [--preview-every 10] [--device cpu]
+    xvfb-run -a .venv/bin/python benchmarks/dev/widget_overhead.py [--crop 64] [--preview-every 10] [--device cpu]
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ Blind deblurring must split the blur it sees between the camera path and the
 scene's own edge profile. This script measures how little the blurred data
 alone tell the two apart on the evaluation cases of ``blind_eval.py``. For
 each case and each scale ``s < 1`` it takes the true path scaled by ``s`` about
-its mean (a path estimate with blur mismatch about ``1 - s``: FINDINGS.md,
-section 3) and looks for the spatial Gaussian ``G_sigma`` of the sharp scene
+its mean (a path estimate with blur mismatch about ``1 - s``: docs/model.md,
+"Judging an estimate") and looks for the spatial Gaussian ``G_sigma`` of the sharp scene
 (the same in every view) that makes ``K_{s p} G_sigma l`` closest to the
 noise-free blurred data ``K_p l``. It prints the rms of what is left, next to
 the noise of the evaluation (sigma 0.002) and to the rms of the blur itself,
@@ -15,12 +15,11 @@ The Gaussian is only one of the softer scenes a solver could pick (the best
 latent for the scaled path fits better still), so the residual is an upper
 bound on how far apart the two explanations are. Computed on the grayscale
 light field (the solver estimates the path on it), with ``CROP`` px borders
-removed. docs/blind.md ("How much the data say about the path's size")
-quotes its figures.
+removed. docs/blind.md ("Results and limits") describes the ambiguity.
 
 Usage::
 
-    python benchmarks/blind_ambiguity.py [--cases syn-p1,syn-p2,lytro-p1,lytro-p2] [--scales 0.7,0.8,0.9]
+    python benchmarks/dev/blind_ambiguity.py [--cases syn-p1,syn-p2,lytro-p1,lytro-p2] [--scales 0.7,0.8,0.9]
 """
 
 from __future__ import annotations

@@ -5,12 +5,12 @@ names say (``RR`` the view row) and read the other way round, the motion per
 view step (``view_shifts``: row ``v``, then row ``u``; columns ``y``, ``x``;
 px/view), and for the four 128 x 128 Lytro crops of ``blind_eval.py`` the
 percentiles of the disparity map the blind solver weights its fit pixels by
-(``blind._disparity_map`` on the grayscale sharp crop). docs/blind.md ("The
-Lytro crops had their view axes swapped") quotes its figures.
+(``blind._disparity_map`` on the grayscale sharp crop). docs/io.md ("View order")
+explains why the view order matters.
 
 Usage::
 
-    python benchmarks/view_order.py
+    python benchmarks/dev/view_order.py
 """
 
 from __future__ import annotations

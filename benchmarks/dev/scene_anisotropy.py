@@ -26,11 +26,11 @@ isotropic Gaussian). This script measures three things:
    so that it is about as soft along y as along x, blurred by the same path
    with the same noise as ``blind_eval.py``. Prints the same covariance figures.
 
-docs/blind.md ("The Lytro views are softer along x") quotes the figures.
+docs/blind.md ("Cameras whose views are softer along one axis") explains its use.
 
 Usage::
 
-    python benchmarks/scene_anisotropy.py [--json eval.json] [--run lytro-p1,lytro2-p4] [--sigma 0.57]
+    python benchmarks/dev/scene_anisotropy.py [--json eval.json] [--run lytro-p1,lytro2-p4] [--sigma 0.57]
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/blind_dev.py [--cases syn-p1,lytro-p2] [--set key=value ...] [--oracle]
+    python benchmarks/dev/blind_dev.py [--cases syn-p1,lytro-p2] [--set key=value ...] [--oracle]
         [--device cpu] [--preset default]
 
 Prints, per case: PSNR of blurred / restored (8 px borders cropped), blur mismatch,
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _eval_module():
