@@ -293,7 +293,7 @@ def run_method(method: str, case: Case, device: str, quick: bool):
 
     if method == "camera":
         params = _blind_params(blind, "default").replace(
-            edge_anisotropy=CAMERA_EDGE_ANISOTROPY[case.scene.rstrip("0123456789")])
+            latent={"edge_anisotropy": CAMERA_EDGE_ANISOTROPY[case.scene.rstrip("0123456789")]})
     else:
         params = _blind_params(blind, method)
     res = blind.blind_deblur(

@@ -9,23 +9,31 @@ import pytest
 import torch
 from scipy.ndimage import gaussian_filter
 
-from napari_lfdeblur import blind
+from napari_lfdeblur import blind, devices
 from napari_lfdeblur.blind import (
     BlindParams,
     BlindResult,
+    JointParams,
+    LatentParams,
+    PathFitParams,
+    _alternating,
+    _disparity,
+    _latent,
+    _memory,
+    _path_fit,
     blind_deblur,
-    canonical_time_direction,
-    elevate_degree,
     iter_blind_deblur,
-    sparse_gradient_prior,
 )
 from napari_lfdeblur.blur import BlurOperator, simulate_blur
-from napari_lfdeblur.path import bezier_positions, linear_path
+from napari_lfdeblur.deconvolution import DeconvolutionParams
+from napari_lfdeblur.path import bezier_positions, center_path, linear_path
+from napari_lfdeblur.priors import gradient_yx, sparse_gradient_prior
+from napari_lfdeblur.progress import run_to_completion, with_previews
 
 from napari_lfdeblur.metrics import chamfer_distance
 
 # small and fast: the test cases use few iterations
-FAST = dict(n_outer=2, path_steps=100, tv_iter=15, final_n_times=6, n_restarts=3)
+FAST = dict(path=dict(n_outer=2, steps=100, n_restarts=3), final={"n_iter": 15}, final_n_times=6)
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -120,7 +128,7 @@ def test_result_gauge_and_range(linear_case, linear_result):
     assert cp.shape == (2, 3)
     # zero-mean gauge for the model's instants
     assert np.allclose(bezier_positions(cp, res.params.n_times).mean(0), 0, atol=1e-5)
-    # FINDINGS section 3: the path stays within the aperture's box
+    # the path stays within the aperture's box (docs/model.md)
     V = linear_case[0].shape[0]
     assert np.abs(cp).max() <= 0.35 * (V - 1) + 1e-6
     assert res.loss_history and all(np.isfinite(res.loss_history))
@@ -130,7 +138,7 @@ def test_result_gauge_and_range(linear_case, linear_result):
 def test_same_seed_same_result():
     lf = _scene((5, 5, 24, 24), seed=3)
     blurred = simulate_blur(lf, linear_path(1.5, 60.0), n_times=16)
-    p = BlindParams().replace(n_outer=2, path_steps=40, tv_iter=5, n_restarts=2, final_n_times=4)
+    p = BlindParams().replace(path=dict(n_outer=2, steps=40, n_restarts=2), final={"n_iter": 5}, final_n_times=4)
     a = blind_deblur(blurred, params=p, device="cpu", seed=7)
     b = blind_deblur(blurred, params=p, device="cpu", seed=7)
     np.testing.assert_array_equal(a.control_points, b.control_points)
@@ -138,23 +146,23 @@ def test_same_seed_same_result():
 
 
 def test_estimated_paths_stay_in_range_on_flat_scene():
-    # a scene of nearly zero disparity gives the path no hold (FINDINGS section 3): it must stay boxed
+    # a scene of nearly zero disparity gives the path no hold: it must stay boxed
     rng = np.random.default_rng(0)
     view = rng.random((20, 20)).astype(np.float32)
     lf = np.broadcast_to(view, (5, 5, 20, 20)).copy()
-    p = BlindParams().replace(n_outer=2, path_steps=60, tv_iter=0, estimate_z=True)
+    p = BlindParams().replace(path=dict(n_outer=2, steps=60, estimate_z=True), final=None)
     res = blind_deblur(lf, params=p, device="cpu")
     box = 0.35 * 4
     assert np.abs(res.control_points[:, :2]).max() <= box + 1e-6
     assert np.abs(res.control_points[:, 2]).max() <= 0.5 * box + 1e-6
-    # tv_iter = 0 returns the input unchanged
+    # final = None returns the input unchanged
     np.testing.assert_array_equal(res.lightfield, lf)
 
 
 def test_infinity_disparity_runs_and_keeps_shape():
     lf = _scene((5, 5, 20, 20), seed=2)[..., None].repeat(3, axis=-1)
     blurred = simulate_blur(lf, linear_path(1.0), n_times=8, infinity_disparity=0.5)
-    p = BlindParams().replace(n_outer=1, path_steps=20, tv_iter=3, n_restarts=1, final_n_times=4)
+    p = BlindParams().replace(path=dict(n_outer=1, steps=20, n_restarts=1), final={"n_iter": 3}, final_n_times=4)
     res = blind_deblur(blurred, infinity_disparity=0.5, params=p, device="cpu")
     assert res.lightfield.shape == lf.shape and np.all(np.isfinite(res.lightfield))
 
@@ -163,14 +171,14 @@ def test_generator_yields_progress_and_closes_promptly(monkeypatch):
     lf = _scene((5, 5, 20, 20), seed=4)
     blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
     calls = {"n": 0}
-    real = blind._l0_latent
+    real = _alternating.l0_latent
 
     def counting(*a, **k):
         calls["n"] += 1
         return real(*a, **k)
 
-    monkeypatch.setattr(blind, "_l0_latent", counting)
-    gen = iter_blind_deblur(blurred, params=BlindParams().replace(n_outer=50, path_tol=0.0), device="cpu")
+    monkeypatch.setattr(_alternating, "l0_latent", counting)
+    gen = iter_blind_deblur(blurred, params=BlindParams().replace(path=dict(n_outer=50, tol=0.0)), device="cpu")
     first = next(gen)
     second = next(gen)
     assert first.stage.startswith("path") and first.control_points.shape[1] == 3
@@ -203,9 +211,9 @@ def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatc
     lf = _scene((5, 5, 20, 20), seed=4)
     blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
     count = _count_blur_calls(monkeypatch)
-    monkeypatch.setattr(blind, "PREVIEW_MIN_INTERVAL", 0.0)
-    p = BlindParams().replace(n_outer=3, path_tol=0.0, path_steps=60, tv_iter=0, preview_every=4)
-    gen = iter_blind_deblur(blurred, params=p, device="cpu")
+    p = BlindParams().replace(path=dict(n_outer=3, tol=0.0, steps=60), final=None)
+    every = 4
+    gen = with_previews(iter_blind_deblur(blurred, params=p, device="cpu"), every)
     work, records, last = [], [], 0
     for rec in gen:
         work.append(count["n"] - last)
@@ -229,9 +237,12 @@ def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatc
     assert keys == sorted(keys) and len(set(keys)) == len(keys)
     fractions = [r.fraction for r in records]
     assert fractions == sorted(fractions) and fractions[-1] <= 2 / 3 + 1e-9
-    # a light-field preview on every preview_every-th record, of the input's shape, in [0, 1]
+    # every record can make a light-field estimate; with_previews(gen, every) makes one every
+    # every-th record (the 1st, every+1-th, ...; and possibly the last), of the input's shape, in [0, 1]
+    assert all(r.estimate is not None for r in records)
     with_preview = [i for i, r in enumerate(records, 1) if r.preview is not None]
-    assert with_preview == list(range(p.preview_every, len(records) + 1, p.preview_every))
+    cadence = list(range(1, len(records) + 1, every))
+    assert with_preview[: len(cadence)] == cadence and set(with_preview) <= set(cadence) | {len(records)}
     for i in with_preview:
         prev = records[i - 1].preview
         assert prev.shape == blurred.shape and prev.dtype == np.float32
@@ -242,7 +253,7 @@ def test_close_stops_the_work_at_once(monkeypatch):
     lf = _scene((5, 5, 20, 20), seed=4)
     blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
     count = _count_blur_calls(monkeypatch)
-    gen = iter_blind_deblur(blurred, params=BlindParams().replace(n_outer=50, path_tol=0.0), device="cpu")
+    gen = iter_blind_deblur(blurred, params=BlindParams().replace(path=dict(n_outer=50, tol=0.0)), device="cpu")
     for _ in range(3):
         next(gen)
     done = count["n"]
@@ -256,15 +267,15 @@ def test_close_stops_the_work_at_once(monkeypatch):
 def test_path_stage_preview_matches_colour_input_and_undoes_the_refocus():
     lf = _scene((5, 5, 16, 16), seed=2)[..., None].repeat(3, axis=-1)
     blurred = simulate_blur(lf, linear_path(1.0), n_times=8, infinity_disparity=0.5)
-    p = BlindParams().replace(n_outer=1, path_steps=20, tv_iter=0, n_restarts=1, preview_every=1)
-    first = next(iter_blind_deblur(blurred, infinity_disparity=0.5, params=p, device="cpu"))
+    p = BlindParams().replace(path=dict(n_outer=1, steps=20, n_restarts=1), final=None)
+    first = next(with_previews(iter_blind_deblur(blurred, infinity_disparity=0.5, params=p, device="cpu"), 1))
     prev = first.preview
     assert prev.shape == blurred.shape and prev.dtype == np.float32
     np.testing.assert_array_equal(prev[..., 0], prev[..., 2])  # grayscale estimate on every channel
     # the latent is of the refocused light field: the preview is back in the input's frame
     gray = blurred.mean(-1)
     err = np.abs(prev[..., 0] - gray)[:, :, 3:-3, 3:-3].mean()
-    sheared = blind._shear(torch.as_tensor(gray)[..., None], 0.5)[..., 0].numpy()
+    sheared = _disparity.shear(torch.as_tensor(gray)[..., None], 0.5)[..., 0].numpy()
     err_sheared = np.abs(prev[..., 0] - sheared)[:, :, 3:-3, 3:-3].mean()
     assert err < err_sheared
 
@@ -280,19 +291,76 @@ def test_presets_round_trip_through_json(name):
     assert BlindParams.from_dict(json.loads(text)) == p
 
 
+def test_nested_params_json_is_nested_and_sub_dicts_merge_onto_the_defaults():
+    d = json.loads(BlindParams.preset("paper").to_json())
+    assert set(d) >= {"latent", "path", "joint", "final"} and d["joint"]["lr"] == 1.0
+    assert d["final"]["weight"] == 0.004 and d["final"]["tol"] == 0.0
+    # a partial file: missing keys, and missing keys of a sub-dict, take the defaults
+    p = BlindParams.from_json('{"n_control_points": 3, "path": {"steps": 7}, "final": {"n_iter": 9}}')
+    assert p.n_control_points == 3 and p.path == PathFitParams(steps=7)
+    assert p.final == BlindParams().final.replace(n_iter=9) and p.latent == LatentParams()
+    assert BlindParams.from_dict({"final": None}).final is None
+    assert BlindParams.from_json(BlindParams().replace(final=None).to_json()).final is None
+    # unknown keys, at the top or inside a sub-dict, are a data error
+    with pytest.raises(ValueError, match="unknown blind path fit parameter.*bogus"):
+        BlindParams.from_dict({"path": {"bogus": 1}})
+    with pytest.raises(ValueError, match="unknown deconvolution parameter"):
+        BlindParams.from_json('{"final": {"iterations": 3}}')
+    with pytest.raises(ValueError, match="unknown blind parameter.*tv_iter"):
+        BlindParams.from_dict({"tv_iter": 3})  # the old flat field
+    with pytest.raises(ValueError, match="needs a dict"):
+        BlindParams.from_json("[1, 2]")
+    with pytest.raises(TypeError, match="needs a dict"):
+        BlindParams.from_dict([("n_times", 3)])
+
+
+def test_replace_merges_a_dict_into_the_current_sub_params_or_takes_an_instance():
+    p = BlindParams().replace(latent={"edge_anisotropy": 0.6, "n_cg": 2})
+    q = p.replace(n_control_points=5, latent={"edge_sigma": 0.3}, final={"n_iter": 50})
+    assert q.n_control_points == 5
+    assert q.latent == LatentParams(edge_anisotropy=0.6, n_cg=2, edge_sigma=0.3)  # merged into p's latent
+    assert q.final == DeconvolutionParams(method="tv", weight=0.002, n_iter=50, tol=0.0)
+    assert q.path == p.path and q.joint == p.joint
+    assert p.replace(joint=JointParams(n_iter=3)).joint == JointParams(n_iter=3)
+    # final = None skips the final stage; a dict then starts from the default final stage
+    assert p.replace(final=None).replace(final={"n_iter": 4}).final == BlindParams().final.replace(n_iter=4)
+    # unknown keywords, at the top or in a sub-dict, are a TypeError
+    with pytest.raises(TypeError, match="unknown blind parameter.*tv_iter"):
+        p.replace(tv_iter=3)
+    with pytest.raises(TypeError, match="unknown blind latent parameter.*bogus"):
+        p.replace(latent={"bogus": 1})
+    with pytest.raises(TypeError, match="BlindParams.latent must be a LatentParams"):
+        BlindParams(latent={"n_cg": 2})
+    with pytest.raises(TypeError, match="BlindParams.final"):
+        p.replace(final=JointParams())
+    with pytest.raises(TypeError, match="n_control_points"):
+        BlindParams(n_control_points=2.0)
+    with pytest.raises(ValueError, match="path.steps"):
+        p.replace(path={"steps": 0})
+    # blind_deblur: an override goes through replace(); an unknown keyword is a TypeError
+    good = np.zeros((5, 5, 8, 8), np.float32)
+    with pytest.raises(TypeError, match="tv_iter"):
+        blind_deblur(good, tv_iter=3)
+    with pytest.raises(TypeError, match="unknown blind path fit parameter"):
+        iter_blind_deblur(good, path={"path_steps": 3})
+    with pytest.raises(TypeError, match="seed"):
+        iter_blind_deblur(good, seed=1.5)
+
+
 def test_paper_preset_is_the_published_settings():
     p = BlindParams.preset("paper")
-    assert (p.method, p.n_iter, p.path_lr, p.lf_lr, p.n_times) == ("joint", 1000, 1.0, 0.04, 7)
-    assert (p.prior_weight, p.prior_decay, p.prior_floor) == (8e-3, 0.997, 0.1)
-    assert (p.eps, p.eps_decay, p.eps_min) == (0.12, 0.997, 0.04)
-    assert (p.tv_weight, p.tv_iter) == (0.004, 100)
+    j = p.joint
+    assert (p.method, j.n_iter, j.lr, j.lf_lr, p.n_times) == ("joint", 1000, 1.0, 0.04, 7)
+    assert (j.prior_weight, j.prior_decay, j.prior_floor) == (8e-3, 0.997, 0.1)
+    assert (j.eps, j.eps_decay, j.eps_min) == (0.12, 0.997, 0.04)
+    assert (p.final.weight, p.final.n_iter) == (0.004, 100)
     assert blind.PRESETS["paper"] == p
 
 
 def test_joint_method_runs():
     lf = _scene((5, 5, 16, 16), seed=5)
     blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
-    p = BlindParams.preset("paper").replace(n_iter=5, tv_iter=2)
+    p = BlindParams.preset("paper").replace(joint={"n_iter": 5}, final={"n_iter": 2})
     res = blind_deblur(blurred, params=p, device="cpu")
     assert res.lightfield.shape == lf.shape and len(res.loss_history) == 5
 
@@ -310,9 +378,9 @@ def test_bad_input_gives_clear_errors():
     with pytest.raises(ValueError, match="unknown blind parameter"):
         BlindParams.from_json('{"learning_rate": 1}')
     with pytest.raises(ValueError, match="n_iter"):
-        BlindParams(n_iter=-1)
-    with pytest.raises(ValueError, match="path_steps"):
-        blind_deblur(good, path_steps=-5)
+        BlindParams(joint=JointParams(n_iter=-1))
+    with pytest.raises(ValueError, match="path.steps"):
+        blind_deblur(good, path={"steps": -5})
     with pytest.raises(ValueError, match="unknown blind preset"):
         BlindParams.preset("fastest")
     with pytest.raises(ValueError, match="method"):
@@ -320,19 +388,19 @@ def test_bad_input_gives_clear_errors():
     with pytest.raises(ValueError, match="n_control_points"):
         blind_deblur(good, n_control_points=1)
     with pytest.raises(ValueError, match="n_random_later"):
-        BlindParams(n_random_later=-1)
-    with pytest.raises(ValueError, match="fit_robust"):
-        BlindParams(fit_robust=-0.1)
+        PathFitParams(n_random_later=-1)
+    with pytest.raises(ValueError, match="path.robust"):
+        PathFitParams(robust=-0.1)
     with pytest.raises(ValueError, match="edge_sigma"):
-        BlindParams(edge_sigma=float("nan"))
+        LatentParams(edge_sigma=float("nan"))
     with pytest.raises(ValueError, match="edge_anisotropy"):
-        BlindParams(edge_anisotropy=float("inf"))
-    with pytest.raises(ValueError, match="edge_anisotropy"):
-        BlindParams(edge_anisotropy="wide")
+        LatentParams(edge_anisotropy=float("inf"))
+    with pytest.raises(TypeError, match="edge_anisotropy"):  # a wrong type: TypeError by the error contract
+        LatentParams(edge_anisotropy="wide")
     with pytest.raises(ValueError, match="edge_sigma_from"):
-        BlindParams(edge_sigma_from=0)
+        LatentParams(edge_sigma_from=0)
     with pytest.raises(ValueError, match="disparity_weight"):
-        BlindParams(disparity_weight=-1.0)
+        PathFitParams(disparity_weight=-1.0)
 
 
 # ------------------------------------------------------------ pieces
@@ -360,7 +428,7 @@ def test_disparity_map_finds_the_disparity_of_each_half():
     lf = _two_disparity_halves(Y, X, 1, -2, seed=0)
     # blurred by an in-plane path, the views stay consistent at the same disparity
     lf = simulate_blur(lf, linear_path(1.0), n_times=8)
-    d = blind._disparity_map(torch.as_tensor(lf))
+    d = _disparity.disparity_map(torch.as_tensor(lf))
     assert d.shape == (Y, X)
     m = 2 * 2 + 2  # the smoothing window and the largest shift of a view
     np.testing.assert_allclose(d[m:-m, m : X // 2 - m], 1.0, atol=0.13)
@@ -385,12 +453,12 @@ def test_gram_loss_equals_direct_fit_up_to_a_constant():
     torch.manual_seed(1)
     f = torch.rand(5, 5, 20, 24, 1, dtype=torch.float64)
     lat = torch.rand(5, 5, 20, 24, 1, dtype=torch.float64)
-    gl = blind._GramLoss(f, 10**6, np.random.default_rng(0), 6, 1.4, 0.0, 1)
+    gl = _path_fit.GramLoss(f, 10**6, np.random.default_rng(0), 6, 1.4, 0.0, 1)
     gl.set_latent(lat)
 
     def direct(cp):
         b = BlurOperator(f.shape, cp, n_times=6, device="cpu", dtype=torch.float64).forward(lat)
-        (by, bx), (fy, fx) = blind._grad_yx(b), blind._grad_yx(f)
+        (by, bx), (fy, fx) = gradient_yx(b), gradient_yx(f)
         r = (by - fy)[:, :, gl.ys, gl.xs] ** 2 + (bx - fx)[:, :, gl.ys, gl.xs] ** 2
         return float(r.sum())
 
@@ -405,12 +473,12 @@ def test_gram_loss_with_robust_weights_equals_the_weighted_direct_fit():
     f = torch.rand(5, 5, 16, 18, 1, dtype=torch.float64)
     lat = torch.rand(5, 5, 16, 18, 1, dtype=torch.float64)
     ref_cp = linear_path(1.0, 40.0)
-    gl = blind._GramLoss(f, 10**6, np.random.default_rng(0), 6, 1.4, 0.0, 1)
+    gl = _path_fit.GramLoss(f, 10**6, np.random.default_rng(0), 6, 1.4, 0.0, 1)
     gl.set_latent(lat, ref_cp, robust=0.5)
 
     def residuals(cp):
         b = BlurOperator(f.shape, cp, n_times=6, device="cpu", dtype=torch.float64).forward(lat)
-        (by, bx), (fy, fx) = blind._grad_yx(b), blind._grad_yx(f)
+        (by, bx), (fy, fx) = gradient_yx(b), gradient_yx(f)
         r = (by - fy)[:, :, gl.ys, gl.xs] ** 2 + (bx - fx)[:, :, gl.ys, gl.xs] ** 2
         return r.sum(dim=(0, 1, 3))  # per fitted pixel
 
@@ -426,15 +494,15 @@ def test_edge_blurred_operator_is_adjoint_and_commutes():
     torch.manual_seed(3)
     shape = (4, 5, 12, 14, 1)
     op = BlurOperator(shape, linear_path(1.2, 30.0), n_times=5, device="cpu", dtype=torch.float64)
-    A = blind._EdgeBlurred(op, 0.6)
+    A = _latent.EdgeBlurred(op, 0.6)
     x, y = torch.rand(shape, dtype=torch.float64), torch.rand(shape, dtype=torch.float64)
     assert float((A.forward(x) * y).sum()) == pytest.approx(float((x * A.adjoint(y)).sum()), rel=1e-10)
     # an in-plane blur acts over views, the Gaussian within views: away from the borders they commute
     a = A.forward(x)
-    b = blind._gauss_yx(op.forward(x), 0.6)
+    b = _latent.gauss_yx(op.forward(x), 0.6)
     np.testing.assert_allclose(a[:, :, 3:-3, 3:-3], b[:, :, 3:-3, 3:-3], atol=1e-12)
     # the Gaussian keeps constants away from the border
-    one = blind._gauss_yx(torch.ones(shape, dtype=torch.float64), 0.6)
+    one = _latent.gauss_yx(torch.ones(shape, dtype=torch.float64), 0.6)
     np.testing.assert_allclose(one[:, :, 3:-3, 3:-3], 1.0, atol=1e-12)
 
 
@@ -445,45 +513,25 @@ def test_path_fit_finds_the_true_curved_path_from_the_sharp_latent():
 
     sharp = _scene((7, 7, 40, 40), seed=4)
     true = np.array([[-0.9, 0.3, 0.0], [0.6, 1.1, 0.0], [0.8, -0.9, 0.0], [-0.4, -0.2, 0.0]])
-    true = blind.center_path(true, 64)
+    true = center_path(true, 64)
     blurred = simulate_blur(sharp, true, n_times=64)
     p = BlindParams()
     f = torch.as_tensor(blurred)[..., None]
     lat = torch.as_tensor(sharp)[..., None]
     rng = np.random.default_rng(0)
     box = 0.35 * 6
-    gl = blind._GramLoss(f, p.n_pixels, rng, p.n_times, box, 0.0, 1)
+    gl = _path_fit.GramLoss(f, p.path.n_pixels, rng, p.n_times, box, 0.0, 1)
     gl.set_latent(lat)
-    starts = rng.uniform(-1.0, 1.0, size=(p.n_random, 4, 3)) * p.init_length
+    starts = rng.uniform(-1.0, 1.0, size=(p.path.n_random, 4, 3)) * p.path.init_length
     starts[..., 2] = 0.0
-    pp = blind._PathParam(starts, p.n_times, box, "cpu", free_z=False)
+    pp = _path_fit.PathParam(starts, p.n_times, box, "cpu", free_z=False)
     pp.project()
-    gen = blind._fit_path(pp, gl, p.path_steps, p.path_lr)
-    n_reports = 0
-    while True:
-        try:
-            next(gen)
-            n_reports += 1
-        except StopIteration as stop:
-            scores = stop.value.numpy()
-            break
+    reports = []
+    scores = run_to_completion(_path_fit.fit_path(pp, gl, p.path.steps, p.path.lr), reports.append).numpy()
+    n_reports = len(reports)
     assert n_reports >= 3  # the fit runs on while its best path improves (it used to stop after ~10 steps)
     best = pp.numpy()[int(np.argmin(scores))]
     assert path_error(best, true, lightfield=sharp).blur_mismatch < 0.1
-
-
-def test_elevate_degree_keeps_the_curve():
-    cp = np.array([[0.0, 0, 0], [1, 2, 0.5], [3, -1, 0]])
-    up = elevate_degree(cp, 5)
-    assert up.shape == (5, 3)
-    np.testing.assert_allclose(bezier_positions(up, 33), bezier_positions(cp, 33), atol=1e-12)
-
-
-def test_canonical_time_direction():
-    cp = np.array([[1.0, 0, 0], [0.2, 0.5, 0], [-1, 0.1, 0]])
-    out = canonical_time_direction(cp)
-    np.testing.assert_array_equal(out, cp[::-1])
-    np.testing.assert_array_equal(canonical_time_direction(out), out)
 
 
 # ------------------------------------------------------------ memory
@@ -498,27 +546,27 @@ def test_memory_estimate_grows_with_size():
 
 
 def test_device_falls_back_to_cpu_when_memory_is_short(monkeypatch):
-    monkeypatch.setattr(blind, "_free_memory", lambda device: 1024)
+    monkeypatch.setattr(devices, "free_memory", lambda device: 1024)
     with pytest.warns(RuntimeWarning, match="CPU instead"):
-        dev = blind.plan_device(torch.device("cuda"), 10**9)
+        dev = devices.plan_device(torch.device("cuda"), 10**9)
     assert dev.type == "cpu"
     with pytest.warns(RuntimeWarning, match="may fail"):
-        assert blind.plan_device(torch.device("cpu"), 10**9).type == "cpu"
-    monkeypatch.setattr(blind, "_free_memory", lambda device: 10**12)
+        assert devices.plan_device(torch.device("cpu"), 10**9).type == "cpu"
+    monkeypatch.setattr(devices, "free_memory", lambda device: 10**12)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert blind.plan_device(torch.device("cuda"), 10**9).type == "cuda"
+        assert devices.plan_device(torch.device("cuda"), 10**9).type == "cuda"
 
 
 def test_plan_tiles_fits_the_budget():
     shape = (9, 9, 600, 800, 3)
     p = BlindParams()
-    assert blind.plan_tiles(shape, p, None) is None
-    assert blind.plan_tiles(shape, p, blind.estimate_blind_memory(shape, p)) is None
+    assert _memory.plan_tiles(shape, p, None) is None
+    assert _memory.plan_tiles(shape, p, blind.estimate_blind_memory(shape, p)) is None
     free = blind.estimate_blind_memory(shape, p) // 3
-    ty, tx = blind.plan_tiles(shape, p, free)
-    assert blind.MIN_TILE <= ty < 600 and blind.MIN_TILE <= tx < 800
-    m = blind.TILE_MARGIN
+    ty, tx = _memory.plan_tiles(shape, p, free)
+    assert _memory.MIN_TILE <= ty < 600 and _memory.MIN_TILE <= tx < 800
+    m = _memory.TILE_MARGIN
     result = 4 * 9 * 9 * 600 * 800 * 3
     assert blind.estimate_blind_memory((9, 9, ty + 2 * m, tx + 2 * m, 3), p) + result <= free
     # not much smaller than needed: 1.25 times the side would not fit
@@ -526,7 +574,7 @@ def test_plan_tiles_fits_the_budget():
     assert blind.estimate_blind_memory((9, 9, big + 2 * m, big + 2 * m, 3), p) + result > free
     # the tiles cover the image exactly once, each inside its padded window
     cover = np.zeros((600, 800), int)
-    for core, pad in blind._tiles(600, 800, (ty, tx), m):
+    for core, pad in _memory.tiles(600, 800, (ty, tx), m):
         cover[core] += 1
         assert pad[0].start <= core[0].start and pad[0].stop >= core[0].stop
         assert pad[1].start <= core[1].start and pad[1].stop >= core[1].stop
@@ -539,26 +587,23 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
     sharp = _scene((5, 5, 72, 72), seed=6)
     cp = np.array([[-0.6, 0.2, -0.3], [0.5, -0.3, 0.3]])
     blurred = simulate_blur(sharp, cp, n_times=32)
-    p = BlindParams().replace(n_control_points=2, n_outer=2, path_steps=60, tv_iter=20, final_n_times=8,
-                              preview_every=5)
+    p = BlindParams().replace(n_control_points=2, path=dict(n_outer=2, steps=60), final={"n_iter": 20},
+                              final_n_times=8)
     full = blind.estimate_blind_memory(blurred.shape, p)
-    monkeypatch.setattr(blind, "_free_memory", lambda device: full // 2)
-    monkeypatch.setattr(blind, "PREVIEW_MIN_INTERVAL", 0.0)
+    monkeypatch.setattr(devices, "free_memory", lambda device: full // 2)
     with pytest.warns(RuntimeWarning, match="overlapping tiles"):
-        gen = iter_blind_deblur(blurred, params=p, device="cpu")
+        gen = with_previews(iter_blind_deblur(blurred, params=p, device="cpu"), 5)
     stages, previews = set(), []
-    while True:
-        try:
-            rec = next(gen)
-            stages.add(rec.stage)
-            if rec.stage.startswith("path") and rec.preview is not None:
-                previews.append(rec.preview)
-        except StopIteration as stop:
-            res = stop.value
-            break
+
+    def collect(rec):
+        stages.add(rec.stage)
+        if rec.stage.startswith("path") and rec.preview is not None:
+            previews.append(rec.preview)
+
+    res = run_to_completion(gen, collect)
     assert res.info["tile"][0] < 72 and any(s.startswith("final (tile 2/") for s in stages)
     # the path-stage previews show the central crop where it is in the full frame, edge-padded around it
-    c = min(72, res.info["tile"][0] + 2 * blind.TILE_MARGIN)
+    c = min(72, res.info["tile"][0] + 2 * _memory.TILE_MARGIN)
     o = (72 - c) // 2
     assert previews and 0 < o and o + c < 72
     for prev in previews:
@@ -568,7 +613,7 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
         assert np.ptp(prev[:, :, o:o + c, o:o + c], axis=(2, 3)).min() > 0  # the crop itself is not padding
     assert res.lightfield.shape == blurred.shape and np.isfinite(res.lightfield).all()
     # the tiles, with their overlap, give nearly what one full-frame solve with that path gives
-    ref = deconvolve(blurred, res.control_points, n_times=8, method="tv", weight=p.tv_weight, n_iter=20, tol=0.0,
+    ref = deconvolve(blurred, res.control_points, n_times=8, method="tv", weight=p.final.weight, n_iter=20, tol=0.0,
                      device="cpu")
     assert np.abs(res.lightfield - ref).max() < 2e-3
 
@@ -582,7 +627,7 @@ def test_out_of_memory_mid_run_falls_back_and_releases(monkeypatch):
 
     gpu_buffers = []
 
-    def fake_run(arr, d_inf, p, dev, seed, n_cp, tile=None):
+    def fake_run(dev):
         devices_run.append(dev.type)
         yield "progress"
         if dev.type == "cuda":
@@ -593,11 +638,10 @@ def test_out_of_memory_mid_run_falls_back_and_releases(monkeypatch):
         assert gpu_buffers[0]() is None
         return "done on cpu"
 
-    monkeypatch.setattr(blind, "_run", fake_run)
-    monkeypatch.setattr(blind, "_empty_cache", lambda dev: released.append(dev.type))
-    gen = blind._run_with_fallback(None, 0.0, None, torch.device("cuda"), 0, None)
+    monkeypatch.setattr(devices, "empty_cache", lambda dev: released.append(dev.type))
+    gen = devices.run_with_cpu_fallback(fake_run, torch.device("cuda"))
     with pytest.warns(RuntimeWarning, match="out of memory"):
-        out = blind.run_to_completion(gen)
+        out = run_to_completion(gen)
     assert out == "done on cpu"
     assert devices_run == ["cuda", "cpu"]
     assert "cuda" in released  # memory released after the failure (and in the finally)
@@ -615,7 +659,7 @@ def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys, monkeypatch):
     src = tmp_path / "blurred.npz"
     np.savez(src, lightfield=blurred)
     params = tmp_path / "p.json"
-    params.write_text(BlindParams().replace(n_outer=1, path_steps=10, tv_iter=2, n_restarts=1).to_json())
+    params.write_text(BlindParams().replace(path=dict(n_outer=1, steps=10, n_restarts=1), final={"n_iter": 2}).to_json())
     out = tmp_path / "sharp.npz"
     assert main(["deblur", str(src), str(out), "--params", str(params), "--device", "cpu"]) == 0
     assert out.exists()
@@ -638,7 +682,7 @@ def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys, monkeypatch):
     out3 = tmp_path / "sharp3.npz"
     assert main(["deblur", str(src), str(out3), "--params", str(params), "--edge-anisotropy", "0.6",
                  "--device", "cpu"]) == 0
-    assert seen[-1] == BlindParams.from_json(params.read_text()).replace(edge_anisotropy=0.6)
+    assert seen[-1] == BlindParams.from_json(params.read_text()).replace(latent={"edge_anisotropy": 0.6})
     assert main(["deblur", str(src), str(tmp_path / "o4.npz"), "--edge-anisotropy", "nan"]) == 2
     assert "edge_anisotropy" in capsys.readouterr().err
 
@@ -653,13 +697,13 @@ def test_solvers_never_leave_the_caller_without_grad(linear_case):
     gen = iter_deconvolve(small, cp, method="tv", n_iter=5, device="cpu")
     next(gen)
     assert torch.is_grad_enabled()
-    gen = iter_blind_deblur(small, params=BlindParams().replace(n_outer=1, path_steps=20, tv_iter=3), device="cpu")
+    gen = iter_blind_deblur(small, params=BlindParams().replace(path=dict(n_outer=1, steps=20), final={"n_iter": 3}), device="cpu")
     for _ in range(40):
         next(gen)
         assert torch.is_grad_enabled()
     gen.close()
     with torch.no_grad():
-        res = blind_deblur(small, params=BlindParams().replace(n_outer=1, path_steps=20, tv_iter=2), device="cpu")
+        res = blind_deblur(small, params=BlindParams().replace(path=dict(n_outer=1, steps=20), final={"n_iter": 2}), device="cpu")
     assert np.isfinite(res.control_points).all()
 
 
@@ -670,11 +714,11 @@ def test_disparity_weights_of_a_large_view_come_from_a_downsampled_map(monkeypat
     Y, X = 24, 40
     # smooth texture: on raw noise, bilinear shifts bias the least-variance match at fractional disparities
     f = torch.as_tensor(_two_disparity_halves(Y, X, 2, 1, seed=1, smooth=1.5))
-    full = blind._disparity_weights(f, 1.0)
-    monkeypatch.setattr(blind, "DISPARITY_PIXELS", Y * X // 4)  # -> estimated at half resolution
-    half = blind._disparity_weights(f, 1.0)
+    full = _disparity.disparity_weights(f, 1.0)
+    monkeypatch.setattr(_disparity, "DISPARITY_PIXELS", Y * X // 4)  # -> estimated at half resolution
+    half = _disparity.disparity_weights(f, 1.0)
     assert full.shape == half.shape == (Y, X)
-    floor = blind.DISPARITY_FLOOR
+    floor = _disparity.DISPARITY_FLOOR
     for w in (full, half):
         # power 1: w - floor is |d| / max|d|, so the two halves' ratio is that of their disparities
         left = np.median(w[6:-6, 6 : X // 2 - 6]) - floor
@@ -687,29 +731,29 @@ def test_edge_model_starts_at_edge_sigma_from_and_runs_two_alternations_before_s
     blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
     built = []
 
-    class Recording(blind._EdgeBlurred):
+    class Recording(_latent.EdgeBlurred):
         def __init__(self, op, sigma):
             built.append(sigma)
             super().__init__(op, sigma)
 
-    monkeypatch.setattr(blind, "_EdgeBlurred", Recording)
-    base = dict(path_steps=20, n_random=10, n_random_later=5, tv_iter=0, estimate_z=False, edge_sigma=0.5,
-                edge_sigma_from=3)
+    monkeypatch.setattr(_alternating, "EdgeBlurred", Recording)
+    base = BlindParams().replace(path=dict(steps=20, n_random=10, n_random_later=5, estimate_z=False), final=None,
+                                 latent=dict(edge_sigma=0.5, edge_sigma_from=3))
 
-    def alternations(**kw):
+    def alternations(latent=None, **path):
         built.clear()
-        gen = iter_blind_deblur(blurred, device="cpu", **{**base, **kw})
+        gen = iter_blind_deblur(blurred, device="cpu", params=base, path=path, latent=latent or {})
         return max(r.info["alternation"] for r in gen if r.info.get("phase") == "done")
 
     # never still: all 6 alternations, the edge model in alternations 3..6 only
-    assert alternations(n_outer=6, path_tol=0.0) == 6 and built == [(0.5, 0.5)] * 4
+    assert alternations(n_outer=6, tol=0.0) == 6 and built == [(0.5, 0.5)] * 4
     # always still: moves count as still only after alternation 3, so the level stops after 5
     # (two still alternations after the switch), the edge model having run in 3, 4 and 5
-    assert alternations(n_outer=9, path_tol=1e9) == 5 and built == [(0.5, 0.5)] * 3
+    assert alternations(n_outer=9, tol=1e9) == 5 and built == [(0.5, 0.5)] * 3
     # edge_sigma = 0: no edge model at all
-    assert alternations(n_outer=4, path_tol=0.0, edge_sigma=0.0) == 4 and built == []
+    assert alternations(n_outer=4, tol=0.0, latent={"edge_sigma": 0.0}) == 4 and built == []
     # edge_anisotropy splits the same mean square width between the axes, x the softer
-    assert alternations(n_outer=4, path_tol=0.0, edge_anisotropy=0.6) == 4 and len(built) == 2
+    assert alternations(n_outer=4, tol=0.0, latent={"edge_anisotropy": 0.6}) == 4 and len(built) == 2
     sy, sx = built[0]
     assert (sy**2 + sx**2) / 2 == pytest.approx(0.25) and sx**2 - sy**2 == pytest.approx(0.36)
 
@@ -718,7 +762,7 @@ def test_anisotropic_edge_gaussian_has_the_widths_asked_and_is_self_adjoint():
     shape = (2, 2, 41, 41, 1)
     delta = torch.zeros(shape, dtype=torch.float64)
     delta[:, :, 20, 20] = 1.0
-    g = blind._gauss_yx(delta, (1.0, 2.0))[0, 0, :, :, 0].numpy()
+    g = _latent.gauss_yx(delta, (1.0, 2.0))[0, 0, :, :, 0].numpy()
     r = np.arange(41) - 20.0
     assert g.sum() == pytest.approx(1.0)
     # second moments of the kernel along y and x (sampled at whole pixels and cut at 3 sigma,
@@ -726,9 +770,9 @@ def test_anisotropic_edge_gaussian_has_the_widths_asked_and_is_self_adjoint():
     assert (g.sum(axis=1) * r**2).sum() == pytest.approx(1.0, rel=0.05)
     assert (g.sum(axis=0) * r**2).sum() == pytest.approx(4.0, rel=0.05)
     # one axis without blur leaves it untouched; a single sigma is the same on both axes
-    only_x = blind._gauss_yx(delta, (0.0, 1.1))[0, 0, :, :, 0].numpy()
+    only_x = _latent.gauss_yx(delta, (0.0, 1.1))[0, 0, :, :, 0].numpy()
     assert np.count_nonzero(only_x.sum(axis=1)) == 1
-    np.testing.assert_array_equal(blind._gauss_yx(delta, 0.7), blind._gauss_yx(delta, (0.7, 0.7)))
+    np.testing.assert_array_equal(_latent.gauss_yx(delta, 0.7), _latent.gauss_yx(delta, (0.7, 0.7)))
     x, y = torch.rand(shape, dtype=torch.float64), torch.rand(shape, dtype=torch.float64)
-    lhs = float((blind._gauss_yx(x, (0.4, 1.1)) * y).sum())
-    assert lhs == pytest.approx(float((x * blind._gauss_yx(y, (0.4, 1.1))).sum()), rel=1e-12)
+    lhs = float((_latent.gauss_yx(x, (0.4, 1.1)) * y).sum())
+    assert lhs == pytest.approx(float((x * _latent.gauss_yx(y, (0.4, 1.1))).sum()), rel=1e-12)

@@ -26,3 +26,40 @@ def test_host_memory_matches_proc_meminfo():
     got = host_available_memory()
     assert got == pytest.approx(kib * 1024, rel=0.1)
     assert free_memory("cpu") == pytest.approx(got, rel=0.1)
+
+
+def test_cpu_fallback_passes_a_cpu_run_through_and_reraises_cpu_errors():
+    from napari_lfdeblur.devices import run_with_cpu_fallback
+    from napari_lfdeblur.progress import run_to_completion
+
+    seen = []
+
+    def run(dev):
+        seen.append(dev.type)
+        yield 1
+        return "ok"
+
+    assert run_to_completion(run_with_cpu_fallback(run, torch.device("cpu"))) == "ok"
+    assert seen == ["cpu"]
+
+    def failing(dev):
+        yield 1
+        raise torch.cuda.OutOfMemoryError("out of memory")
+
+    with pytest.raises(torch.cuda.OutOfMemoryError):  # no fall-back from the CPU itself
+        run_to_completion(run_with_cpu_fallback(failing, torch.device("cpu")))
+
+
+def test_plan_device_keeps_a_device_with_enough_memory(monkeypatch):
+    import warnings
+
+    from napari_lfdeblur import devices
+
+    monkeypatch.setattr(devices, "free_memory", lambda device: None)  # unknown: keep the device, silently
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert devices.plan_device(torch.device("cpu"), 10**15).type == "cpu"
+    monkeypatch.setattr(devices, "free_memory", lambda device: 10)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a shortage on the CPU with tiles possible: the caller tiles
+        assert devices.plan_device(torch.device("cpu"), 10**6, tiles_possible=True).type == "cpu"

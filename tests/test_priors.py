@@ -121,3 +121,27 @@ def test_bad_input():
         divergence4d([torch.zeros(2, 2, 2, 2)] * 3)
     with pytest.raises(ValueError, match="reduction"):
         tv4d(torch.zeros(2, 2, 2, 2), reduction="max")
+
+
+def test_spatial_gradient_is_the_yx_part_of_gradient4d_and_its_divergence_the_adjoint():
+    from napari_lfdeblur.priors import divergence_yx, gradient_yx
+
+    torch.manual_seed(5)
+    L = torch.rand(3, 4, 5, 6, 2, dtype=torch.float64)
+    gy, gx = gradient_yx(L)
+    g4 = gradient4d(L)
+    assert torch.equal(gy, g4[2]) and torch.equal(gx, g4[3])
+    G = (torch.rand_like(L), torch.rand_like(L))
+    lhs = float((gy * G[0]).sum() + (gx * G[1]).sum())
+    assert lhs == pytest.approx(-float((L * divergence_yx(*G)).sum()), rel=1e-12)
+    zero = torch.zeros_like(L)
+    assert torch.equal(divergence_yx(*G), divergence4d((zero, zero) + G))
+    with pytest.raises(TypeError):
+        gradient_yx(np.zeros((2, 2, 3, 3)))
+
+
+def test_sparse_gradient_prior_rejects_a_non_positive_eps():
+    from napari_lfdeblur.priors import sparse_gradient_prior
+
+    with pytest.raises(ValueError, match="eps"):
+        sparse_gradient_prior(torch.zeros(2, 2, 3, 3), 0.0)

@@ -166,6 +166,31 @@ def test_presets():
         preset_path("zigzag")
 
 
+def test_elevate_degree_keeps_the_curve():
+    from napari_lfdeblur.path import elevate_degree
+
+    cp = np.array([[0.0, 0, 0], [1, 2, 0.5], [3, -1, 0]])
+    up = elevate_degree(cp, 5)
+    assert up.shape == (5, 3)
+    np.testing.assert_allclose(bezier_positions(up, 33), bezier_positions(cp, 33), atol=1e-12)
+
+
+def test_canonical_time_direction():
+    from napari_lfdeblur.path import canonical_time_direction
+
+    cp = np.array([[1.0, 0, 0], [0.2, 0.5, 0], [-1, 0.1, 0]])
+    out = canonical_time_direction(cp)
+    np.testing.assert_array_equal(out, cp[::-1])
+    np.testing.assert_array_equal(canonical_time_direction(out), out)
+
+
+def test_elevate_degree_cannot_lower_the_degree():
+    from napari_lfdeblur.path import elevate_degree
+
+    with pytest.raises(ValueError, match="lower"):
+        elevate_degree(np.zeros((4, 3)), 3)
+
+
 def test_path_json_round_trip_and_no_overwrite(tmp_path):
     cp = random_path(4, extent=2.0, z_extent=0.5, seed=2)
     f = save_path_json(tmp_path / "p.json", cp, n_times=16)

@@ -59,7 +59,11 @@ def main(argv=None):
 
     params = BlindParams.preset(args.preset)
     if args.set:
-        params = params.replace(**{k: _value(v) for k, v in (s.split("=", 1) for s in args.set)})
+        changes = {}  # --set FIELD=VALUE or STAGE.FIELD=VALUE (latent, path, joint, final)
+        for key, v in (s.split("=", 1) for s in args.set):
+            stage, _, name = key.rpartition(".")
+            (changes.setdefault(stage, {}) if stage else changes)[name] = _value(v)
+        params = params.replace(**changes)
     rows = []
     names = ["big"] if args.big else args.cases.split(",")
     for name in names:

@@ -36,6 +36,9 @@ def main(argv=None):
     torch.set_num_threads(args.threads)
     ev = _eval_module()
     from napari_lfdeblur import blind as B
+    from napari_lfdeblur.blind._disparity import gray
+    from napari_lfdeblur.blind._latent import EdgeBlurred, l0_latent
+    from napari_lfdeblur.blind._path_fit import GramLoss, PathParam, fit_path
     from napari_lfdeblur.blur import BlurOperator
     from napari_lfdeblur.metrics import path_error
     from napari_lfdeblur.path import center_path
@@ -44,7 +47,7 @@ def main(argv=None):
     T = p.n_times
     for name in args.cases.split(","):
         case = ev.make_case(name)
-        g = B._gray(torch.as_tensor(case.blurred, dtype=torch.float32))
+        g = gray(torch.as_tensor(case.blurred, dtype=torch.float32))
         V, U = g.shape[:2]
         box = max(0.5, 0.35 * (min(V, U) - 1))
         true = center_path(case.control_points, T)
@@ -52,17 +55,17 @@ def main(argv=None):
         for sigma in (float(s) for s in args.sigmas.split(",")):
             op = BlurOperator(tuple(g.shape), true, n_times=T, device="cpu")
             if sigma > 0:
-                op = B._EdgeBlurred(op, sigma)
+                op = EdgeBlurred(op, sigma)
             latent = g.clone()
             for lam in (4e-3, 2e-3, 1e-3):
-                latent = run_to_completion(B._l0_latent(op, g, lam, p, latent))
+                latent = run_to_completion(l0_latent(op, g, lam, p.latent, latent))
             rng = np.random.default_rng(0)
-            fit = B._GramLoss(g, p.n_pixels, rng, T, box, 0.0, 1)
-            fit.set_latent(latent, true, p.fit_robust, sigma)
-            starts = [true] + [np.c_[rng.uniform(-1, 1, (4, 2)) * p.init_length, np.zeros(4)] for _ in range(300)]
-            pp = B._PathParam(np.stack(starts), T, box, "cpu", free_z=False)
+            fit = GramLoss(g, p.path.n_pixels, rng, T, box, 0.0, 1)
+            fit.set_latent(latent, true, p.path.robust, sigma)
+            starts = [true] + [np.c_[rng.uniform(-1, 1, (4, 2)) * p.path.init_length, np.zeros(4)] for _ in range(300)]
+            pp = PathParam(np.stack(starts), T, box, "cpu", free_z=False)
             pp.project()
-            scores = run_to_completion(B._fit_path(pp, fit, p.path_steps, p.path_lr)).numpy()
+            scores = run_to_completion(fit_path(pp, fit, p.path.steps, p.path.lr)).numpy()
             cps = pp.control_points().detach().double().numpy()
             k = int(np.argmin(scores))
             from_true = path_error(cps[0], case.control_points, lightfield=case.sharp).blur_mismatch

@@ -145,7 +145,7 @@ def main(argv=None):
         from napari_lfdeblur.blind import BlindParams
         from napari_lfdeblur.metrics import path_error
 
-        params = BlindParams.preset("default").replace(tv_iter=0)
+        params = BlindParams.preset("default").replace(final=None)
         rows = []
         for name in args.run.split(","):
             scene, _, pname = name.partition("-")

@@ -5,8 +5,8 @@ names say (``RR`` the view row) and read the other way round, the motion per
 view step (``view_shifts``: row ``v``, then row ``u``; columns ``y``, ``x``;
 px/view), and for the four 128 x 128 Lytro crops of ``blind_eval.py`` the
 percentiles of the disparity map the blind solver weights its fit pixels by
-(``blind._disparity_map`` on the grayscale sharp crop). docs/io.md ("View order")
-explains why the view order matters.
+(``disparity_map`` of ``napari_lfdeblur.blind._disparity`` on the grayscale sharp crop). docs/io.md
+("View order") explains why the view order matters.
 
 Usage::
 
@@ -25,7 +25,8 @@ from blind_dev import _eval_module  # benchmarks/ is on the path when this scrip
 def main():
     torch.set_num_threads(2)
     ev = _eval_module()
-    from napari_lfdeblur import blind, read_lightfield, view_shifts
+    from napari_lfdeblur import read_lightfield, view_shifts
+    from napari_lfdeblur.blind._disparity import disparity_map, gray
     from napari_lfdeblur.io import ViewOrderWarning
 
     with warnings.catch_warnings():
@@ -41,7 +42,7 @@ def main():
     for name, (ys, xs) in windows.items():
         for label, lf in (("as named", as_named), ("upright", upright)):
             crop = np.ascontiguousarray(lf[1:10, 1:10, ys, xs])
-            d = blind._disparity_map(blind._gray(torch.as_tensor(crop)))
+            d = disparity_map(gray(torch.as_tensor(crop)))
             pct = np.percentile(d, [5, 25, 50, 75, 95])
             print(f"| {name} | {label} | {' / '.join(f'{p:+.2f}' for p in pct)} | {np.abs(d).max():.2f} | "
                   f"{(np.abs(d) < 0.15).mean():.2f} |", flush=True)

@@ -31,12 +31,14 @@ def main(argv=None):
     from napari_lfdeblur._napari.layers import add_layer, lightfield_layer_data
     from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
     from napari_lfdeblur.blind import BlindParams, iter_blind_deblur
+    from napari_lfdeblur.progress import with_previews
 
     lf = lytro_sample()[:, :, : args.crop, : args.crop]
     blurred = simulate_blur(lf, arc_path(2.5, 0.3, 20.0))
-    params = BlindParams.preset("default").replace(tv_iter=args.tv_iter, preview_every=args.preview_every)
+    params = BlindParams.preset("default").replace(final={"n_iter": args.tv_iter})
     t0 = time.perf_counter()
-    n_records = sum(1 for _ in iter_blind_deblur(blurred, params=params, device=args.device))
+    n_records = sum(1 for _ in with_previews(iter_blind_deblur(blurred, params=params, device=args.device),
+                                            args.preview_every))
     bare = time.perf_counter() - t0
     print(f"light field {blurred.shape}, device {args.device}")
     print(f"script (iterating the generator): {bare:.1f} s, {n_records} progress records")

@@ -53,6 +53,7 @@ __all__ = [
     "interpolation_matrices",
     "angular_shifts",
     "tap_kernel",
+    "lerp_taps",
 ]
 
 #: elements of temporary memory one block may use (float32: 4 bytes each). Blocks
@@ -99,11 +100,22 @@ def validate_frame(frame, shape):
     return (y0, x0, Yf, Xf)
 
 
-def _lerp_taps(coord: torch.Tensor, size: int):
+def lerp_taps(coord: torch.Tensor, size: int):
     """Clamped bilinear taps for sample coordinates ``coord`` on an axis of ``size``.
 
-    Returns ``(i0, i1, w)`` with value ``(1 - w) * a[i0] + w * a[i1]``; ``w``
-    stays differentiable with respect to ``coord``.
+    Parameters
+    ----------
+    coord : torch.Tensor, float
+        Sample coordinates (clamped to ``[0, size - 1]``).
+    size : int
+        Length of the axis.
+
+    Returns
+    -------
+    i0, i1 : torch.Tensor, int64, ``coord``'s shape
+    w : torch.Tensor, ``coord``'s dtype and shape
+        The value at ``coord`` is ``(1 - w) * a[i0] + w * a[i1]``; ``w``
+        stays differentiable with respect to ``coord``.
     """
     c = coord.clamp(0.0, size - 1.0)
     i0 = torch.floor(c.detach()).clamp_(0, max(size - 2, 0)).long()
@@ -118,7 +130,7 @@ def _interp_matrices(shift: torch.Tensor, size: int) -> torch.Tensor:
     ``shift`` has any shape ``S``; the result has shape ``S + (size, size)``.
     """
     target = torch.arange(size, dtype=shift.dtype, device=shift.device)
-    i0, i1, w = _lerp_taps(shift[..., None] + target, size)
+    i0, i1, w = lerp_taps(shift[..., None] + target, size)
     cols = torch.arange(size, device=shift.device)
     m0 = (i0[..., None] == cols).to(shift.dtype)
     m1 = (i1[..., None] == cols).to(shift.dtype)

@@ -136,19 +136,21 @@ def _add_deblur(sub):
     _input_argument(p, "blurred light field file or folder")
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
     p.add_argument("--preset", default="default", help="parameter preset: default or paper (default: default)")
-    p.add_argument("--params", help="a JSON file of BlindParams (overrides --preset)")
+    p.add_argument("--params", help="a JSON file of BlindParams, nested by stage as BlindParams.to_json writes "
+                   "it; keys left out take their defaults (overrides --preset)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--edge-anisotropy", type=float, metavar="PX",
                    help="how much softer the camera's views are along x than along y, px "
-                        "(BlindParams.edge_anisotropy; first-generation Lytro: about 0.6; default: the preset's, 0)")
+                        "(BlindParams.latent.edge_anisotropy; default: the preset's, 0)")
     p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
 
 
 def _run_deblur(args):
     from .blind import BlindParams, iter_blind_deblur
+    from .progress import run_to_completion
     from .io import write_lightfield
     from .path import save_path_json
 
@@ -164,21 +166,19 @@ def _run_deblur(args):
     else:
         params = BlindParams.preset(args.preset)
     if args.edge_anisotropy is not None:
-        params = params.replace(edge_anisotropy=args.edge_anisotropy)
+        params = params.replace(latent={"edge_anisotropy": args.edge_anisotropy})
     lf, _ = _read(args)
     gen = iter_blind_deblur(lf, infinity_disparity=args.infinity_disparity, params=params,
                             device=args.device, seed=args.seed)
     bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
+
+    def show(rec):
+        bar.n = int(1000 * rec.fraction)
+        bar.set_description(rec.stage, refresh=False)
+        bar.set_postfix_str(f"loss {rec.loss:.3g}", refresh=True)
+
     try:
-        while True:
-            try:
-                rec = next(gen)
-            except StopIteration as stop:
-                result = stop.value
-                break
-            bar.n = int(1000 * rec.fraction)
-            bar.set_description(rec.stage, refresh=False)
-            bar.set_postfix_str(f"loss {rec.loss:.3g}", refresh=True)
+        result = run_to_completion(gen, show)
     finally:
         gen.close()
         bar.close()
@@ -273,6 +273,7 @@ def _run_deconvolve(args):
     from .deconvolution import iter_deconvolve
     from .io import write_lightfield
     from .path import load_path_json
+    from .progress import run_to_completion
 
     out = Path(args.output)
     if out.exists() and not args.overwrite:
@@ -293,20 +294,21 @@ def _run_deconvolve(args):
         method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
     )
     bar = _progress(total=args.iterations, desc="deconvolve", unit="it")
+    last = []
+
+    def show(rec):
+        last[:] = [rec]
+        bar.total = rec.n_iterations
+        bar.n = rec.iteration
+        bar.set_postfix_str(f"{rec.stage} loss={rec.loss:.4g}", refresh=False)
+        bar.refresh()
+
     try:
-        while True:
-            try:
-                rec = next(gen)
-            except StopIteration as stop:
-                result = stop.value
-                break
-            bar.total = rec.n_iterations
-            bar.n = rec.iteration
-            bar.set_postfix_str(f"{rec.stage} loss={rec.loss:.4g}", refresh=False)
-            bar.refresh()
+        result = run_to_completion(gen, show)
     finally:
         gen.close()
         bar.close()
+    rec = last[-1]
     write_lightfield(out, result, overwrite=args.overwrite)
     print(f"wrote {out} {result.shape} ({rec.stage}, {rec.iteration} iteration(s))")
 
@@ -342,7 +344,7 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("lfdeblur: interrupted", file=sys.stderr)
         return 130
-    except (CLIError, ValueError, OSError) as exc:
+    except (CLIError, ValueError, TypeError, OSError) as exc:
         print(f"lfdeblur {args.command}: error: {exc}", file=sys.stderr)
         return 2
     return 0

@@ -95,7 +95,7 @@ def _blind_params(quick: bool):
     from .blind import BlindParams
 
     params = BlindParams.preset("default")
-    return params.replace(n_outer=2, n_restarts=1, tv_iter=10, n_levels=1) if quick else params
+    return params.replace(path={"n_outer": 2, "n_restarts": 1, "n_levels": 1}, final={"n_iter": 10}) if quick else params
 
 
 def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: bool = True, progress=None):

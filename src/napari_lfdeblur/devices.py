@@ -1,12 +1,14 @@
-"""Choice of the torch device the solvers run on."""
+"""Choice of the torch device the solvers run on, its free memory, and the fall-back to the CPU."""
 
 from __future__ import annotations
+
+import warnings
 
 import torch
 
 from ._memory import host_available_memory
 
-__all__ = ["select_device", "free_memory"]
+__all__ = ["select_device", "free_memory", "plan_device", "empty_cache", "run_with_cpu_fallback"]
 
 _CHOICES = ("auto", "cpu", "cuda")
 
@@ -61,3 +63,79 @@ def free_memory(device: str | torch.device | None = "auto") -> int | None:
         free, _ = torch.cuda.mem_get_info(dev)
         return int(free)
     return host_available_memory()
+
+
+def plan_device(device: torch.device, need: int, tiles_possible: bool = False, what: str = "blind deblurring"
+                ) -> torch.device:
+    """The device to run on, given an estimate of the memory needed (bytes).
+
+    A CUDA device without ``need`` bytes free (by :func:`free_memory`) falls
+    back to the CPU with a :class:`RuntimeWarning`; on the CPU a shortage is
+    only warned about (unless ``tiles_possible``: the caller then works in
+    tiles). ``what`` names the job in the warnings.
+
+    Returns
+    -------
+    torch.device
+    """
+    free = free_memory(device)
+    if free is None or need <= free:
+        return device
+    if device.type != "cuda" and tiles_possible:
+        return device
+    if device.type == "cuda":
+        warnings.warn(
+            f"{what} needs about {need / 2**30:.2f} GiB but {device} has {free / 2**30:.2f} GiB free: "
+            "running on the CPU instead",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return torch.device("cpu")
+    warnings.warn(
+        f"{what} needs about {need / 2**30:.2f} GiB but only {free / 2**30:.2f} GiB of memory is "
+        "available: it may fail or swap; crop the light field to be safe",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+    return device
+
+
+def empty_cache(device: torch.device) -> None:
+    """Release cached GPU memory and cuBLAS workspaces (a no-op on the CPU)."""
+    if device.type == "cuda" and torch.cuda.is_available():  # pragma: no cover - needs a GPU
+        torch.cuda.synchronize(device)
+        clear = getattr(torch._C, "_cuda_clearCublasWorkspaces", None)  # held by the caching allocator
+        if clear is not None:
+            clear()
+        torch.cuda.empty_cache()
+
+
+def run_with_cpu_fallback(run, device: torch.device):
+    """Run the solver generator ``run(device)``; if a CUDA run runs out of memory, run it again on the CPU.
+
+    A generator: yields the records of the run(s) and returns the result.
+    The GPU's cache is released after the run (by :func:`empty_cache`), and
+    before the CPU run starts the failed run's frames (and with them its GPU
+    tensors) are gone. The fall-back is announced by a
+    :class:`RuntimeWarning`.
+
+    Parameters
+    ----------
+    run : callable
+        ``run(device)`` returns a solver generator.
+    device : torch.device
+    """
+    try:
+        result = yield from run(device)
+        return result
+    except torch.cuda.OutOfMemoryError as exc:
+        if device.type != "cuda":
+            raise
+        # leave the except block before going on: its traceback holds the failed run's frames,
+        # and with them its GPU tensors
+        message = str(exc).splitlines()[0] if str(exc) else "out of memory"
+    finally:
+        empty_cache(device)
+    warnings.warn(f"the GPU ran out of memory ({message}); starting again on the CPU", RuntimeWarning, stacklevel=2)
+    result = yield from run(torch.device("cpu"))
+    return result

@@ -1,4 +1,4 @@
-"""Camera paths: Bezier curves in R^3 (MODEL.md, "Camera path").
+"""Camera paths: Bezier curves in R^3 (docs/model.md, "Camera path").
 
 A path ``p(t) = (p_x, p_y, p_z)`` for ``t`` in [0, 1] is a Bezier curve of
 ``n >= 2`` control points, an ``(n, 3)`` array. ``p_x`` and ``p_y`` are in view
@@ -22,6 +22,8 @@ __all__ = [
     "bernstein_matrix",
     "bezier_positions",
     "center_path",
+    "elevate_degree",
+    "canonical_time_direction",
     "linear_path",
     "arc_path",
     "shake_path",
@@ -132,7 +134,7 @@ def bezier_positions(control_points, n_times: int):
 
 
 def center_path(control_points, n_times: int = 32) -> np.ndarray:
-    """Move a path to the zero-mean gauge of MODEL.md.
+    """Move a path to the zero-mean gauge (docs/model.md).
 
     The mean of ``p(t_k)`` over the ``T`` instants becomes 0. Bernstein weights
     sum to one, so subtracting that mean from every control point shifts the
@@ -147,6 +149,59 @@ def center_path(control_points, n_times: int = 32) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- presets
+
+
+def elevate_degree(control_points, n_points: int) -> np.ndarray:
+    """Raise the degree of a Bezier curve without changing it.
+
+    Parameters
+    ----------
+    control_points : array_like, shape (n, 3)
+    n_points : int, >= n
+
+    Returns
+    -------
+    ndarray, float64, shape (n_points, 3), the same curve
+
+    Raises
+    ------
+    ValueError
+        If ``n_points < n`` (a degree cannot be lowered exactly).
+    """
+    cp = np.asarray(control_points, dtype=np.float64)
+    if n_points < len(cp):
+        raise ValueError(f"cannot lower a Bezier curve's degree: {len(cp)} -> {n_points} control points")
+    while len(cp) < n_points:
+        n = len(cp)  # degree n-1 -> n
+        new = np.empty((n + 1, cp.shape[1]))
+        new[0], new[n] = cp[0], cp[n - 1]
+        for i in range(1, n):
+            a = i / n
+            new[i] = a * cp[i - 1] + (1 - a) * cp[i]
+        cp = new
+    return cp
+
+
+def canonical_time_direction(control_points) -> np.ndarray:
+    """Pick one of the two time directions of a path (the blur cannot tell them apart).
+
+    The path is reversed when the largest component (in magnitude) of
+    ``last - first`` control point is negative, so that the path moves
+    towards positive values along its main direction.
+
+    Parameters
+    ----------
+    control_points : array_like, shape (n, 3)
+
+    Returns
+    -------
+    ndarray, float64, shape (n, 3)
+    """
+    cp = np.asarray(control_points, dtype=np.float64)
+    d = cp[-1] - cp[0]
+    if d[np.argmax(np.abs(d))] < 0:
+        cp = cp[::-1].copy()
+    return cp
 
 
 def linear_path(length: float = 2.0, angle_deg: float = 0.0, z: float = 0.0) -> np.ndarray:
@@ -248,7 +303,7 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
         raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
     doc = {
         "control_points": cp.tolist(),
-        "units": "p_x, p_y in views; p_z in views per unit of normalised x~ (MODEL.md)",
+        "units": "p_x, p_y in views; p_z in views per unit of normalised x~ (docs/model.md)",
         **extra,
     }
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")

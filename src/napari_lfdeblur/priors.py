@@ -28,6 +28,9 @@ __all__ = [
     "project_tv_dual",
     "prox_l1",
     "gradient_norm_bound",
+    "gradient_yx",
+    "divergence_yx",
+    "sparse_gradient_prior",
 ]
 
 #: the four differenced axes, in order
@@ -67,10 +70,13 @@ def gradient4d(L: torch.Tensor, axis_weights: Sequence[float] | None = None) -> 
         ``g[a][..., i, ...] = L[..., i + 1, ...] - L[..., i, ...]`` along axis
         ``a``, and 0 at the last sample (replicate / Neumann boundary).
     """
-    L = _check(L)
-    w = _weights(axis_weights)
+    return _forward_differences(_check(L), range(4), _weights(axis_weights))
+
+
+def _forward_differences(L: torch.Tensor, axes, w) -> tuple[torch.Tensor, ...]:
+    """Forward differences of ``L`` along ``axes``, weighted by ``w[axis]`` (zero at the last sample)."""
     out = []
-    for axis in range(4):
+    for axis in axes:
         g = torch.zeros_like(L)
         n = L.shape[axis]
         if n > 1:
@@ -98,10 +104,14 @@ def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None
     """
     if len(G) != 4:
         raise ValueError(f"divergence4d takes 4 components (v, u, y, x); got {len(G)}")
-    w = _weights(axis_weights)
+    return _divergence(G, range(4), _weights(axis_weights))
+
+
+def _divergence(G: Sequence[torch.Tensor], axes, w) -> torch.Tensor:
+    """The negative adjoint of :func:`_forward_differences` along ``axes``, one component each."""
     shape = G[0].shape
     div = torch.zeros_like(G[0])
-    for axis, g in enumerate(G):
+    for axis, g in zip(axes, G):
         _check(g)
         if g.shape != shape:
             raise ValueError("divergence4d: the 4 components must have the same shape")
@@ -113,6 +123,68 @@ def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None
         div.narrow(axis, 0, n - 1).add_(last, alpha=w[axis])
         div.narrow(axis, 1, n - 1).sub_(last, alpha=w[axis])
     return div
+
+
+def gradient_yx(L: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The spatial components ``(g_y, g_x)`` of :func:`gradient4d` (the angular ones are not computed).
+
+    Parameters
+    ----------
+    L : torch.Tensor, shape (V, U, Y, X, ...)
+
+    Returns
+    -------
+    tuple of 2 torch.Tensor, each of ``L``'s shape and dtype
+    """
+    return _forward_differences(_check(L), (2, 3), (1.0, 1.0, 1.0, 1.0))
+
+
+def divergence_yx(gy: torch.Tensor, gx: torch.Tensor) -> torch.Tensor:
+    """The negative adjoint of :func:`gradient_yx`: :func:`divergence4d` of ``(0, 0, gy, gx)``.
+
+    Parameters
+    ----------
+    gy, gx : torch.Tensor, each of shape (V, U, Y, X, ...)
+
+    Returns
+    -------
+    torch.Tensor, the components' shape
+    """
+    return _divergence((gy, gx), (2, 3), (1.0, 1.0, 1.0, 1.0))
+
+
+def sparse_gradient_prior(L: torch.Tensor, eps: float) -> torch.Tensor:
+    """The L0-approximating prior ``sum_a mean(min(|d_a L|^2 / eps^2, 1))`` over the 4 axes.
+
+    ``d_a`` are the forward differences of :func:`gradient4d`. This is the
+    sparse-gradient prior of the joint blind method (Srinivasan et al., 2017;
+    after Xu et al., 2013).
+
+    Parameters
+    ----------
+    L : torch.Tensor, shape (V, U, Y, X[, C])
+    eps : float
+        Gradients larger than ``eps`` cost 1 each; smaller ones quadratically less.
+
+    Returns
+    -------
+    torch.Tensor, scalar (differentiable)
+
+    Raises
+    ------
+    ValueError
+        If ``eps <= 0``.
+
+    References
+    ----------
+    .. [1] P. P. Srinivasan, R. Ng and R. Ramamoorthi, "Light Field Blind
+           Motion Deblurring", CVPR 2017.
+    .. [2] L. Xu, S. Zheng and J. Jia, "Unnatural L0 Sparse Representation
+           for Natural Image Deblurring", CVPR 2013.
+    """
+    if eps <= 0:
+        raise ValueError(f"eps must be > 0; got {eps}")
+    return sum(torch.clamp(g * g / (eps * eps), max=1.0).mean() for g in gradient4d(L))
 
 
 def gradient_magnitude4d(grads: Sequence[torch.Tensor], eps: float = 0.0) -> torch.Tensor:

@@ -1,0 +1,371 @@
+"""Blind motion deblurring of light fields: the camera path and the sharp light field.
+
+:func:`blind_deblur` (and its generator form :func:`iter_blind_deblur`) takes a
+motion-blurred light field and returns both the sharp light field and the 3D
+camera path (docs/model.md units, zero-mean gauge), with no depth estimation.
+Parameters are a :class:`BlindParams`, nested by stage
+(:class:`LatentParams`, :class:`PathFitParams`, :class:`JointParams` and the
+final stage's :class:`~napari_lfdeblur.deconvolution.DeconvolutionParams`);
+:data:`PRESETS` names two of them.
+
+Two algorithms, chosen by :attr:`BlindParams.method`:
+
+``'alternating'`` (the ``default`` preset)
+    The plain joint MAP estimate is drawn to "no blur": the blurred light
+    field itself has a lower sparse-gradient prior than the sharp one (Levin
+    et al., 2009; docs/model.md). This method avoids that by design, in the
+    manner of Xu et al. (2013) and Pan et al. (2014):
+
+    1. the path is estimated on the grayscale light field, coarse to fine
+       over a spatial pyramid (views untouched; ``p_x, p_y`` are in views and
+       ``p_z`` in views per normalised ``x~``, so the path means the same at
+       every level);
+    2. at each level the estimate alternates between
+       (a) a strongly sparsified, salient-edge latent light field: the L0
+       gradient-regularised solve ``min ||K_p l - f||^2 + lambda ||grad l||_0``
+       by half-quadratic splitting (conjugate gradients for the quadratic
+       step), whose piecewise-constant result has step edges whatever the
+       current path, and
+       (b) the path fitted to that latent in the gradient domain,
+       ``min_p ||grad_yx(K_p l_s) - grad_yx f||^2``, by Adam, on pixels drawn
+       with a preference for strong gradients and large disparity (read off
+       the blurred input), where the latent's over-sharp edges mislead the
+       fit least; from the ``latent.edge_sigma_from``-th alternation the
+       latent is modelled as sharper than the scene by a spatial Gaussian
+       (``K_p G_sigma``), so that the path need not absorb the edge profile;
+    3. the fit has many local minima, so every alternation fits a wide batch
+       of paths at once (the fit is a small quadratic form in the blur
+       kernel) and keeps the best: at first short lines in spread directions
+       and random paths (never the zero path, where the gradient vanishes in
+       the zero-mean gauge), later the current path, its mirror, perturbed
+       copies and fresh random paths; with a pyramid, the degree is raised
+       (exactly, by Bezier degree elevation) from a line to the requested
+       number of control points on the way up;
+    4. the zero-mean gauge holds throughout (the control points are
+       re-centred inside every step) and the path is kept in a box of the
+       aperture;
+    5. with ``path.estimate_z``, a last stage frees ``p_z``, starting from
+       the in-plane path;
+    6. with ``d_inf != 0`` the path is estimated on the light field refocused
+       by ``d_inf`` (which turns the model into the one with ``d_inf = 0``).
+
+``'joint'`` (the ``paper`` preset)
+    The paper's blind stage as published: Adam on the control points and
+    the grayscale light field jointly, on ``mean((K_p l - f)^2) + w R_eps(l)``
+    with the 4D sparse-gradient prior ``R_eps = mean(min(|grad l|^2 / eps^2, 1))``
+    and ``w``, ``eps`` annealed.
+
+The path found, every colour channel is restored by the non-blind
+:func:`~napari_lfdeblur.deconvolution.deconvolve` with ``params.final``
+(4D TV in both presets), tile by tile when memory is short. Both methods
+return the path time-canonicalised
+(:func:`~napari_lfdeblur.path.canonical_time_direction`), since the blur
+does not depend on the order of the positions.
+
+References
+----------
+.. [1] P. P. Srinivasan, R. Ng and R. Ramamoorthi, "Light Field Blind Motion
+       Deblurring", CVPR 2017.
+.. [2] L. Xu, S. Zheng and J. Jia, "Unnatural L0 Sparse Representation for
+       Natural Image Deblurring", CVPR 2013.
+.. [3] J. Pan, Z. Hu, Z. Su and M.-H. Yang, "Deblurring Text Images via
+       L0-Regularized Intensity and Gradient Prior", CVPR 2014.
+.. [4] A. Levin, Y. Weiss, F. Durand and W. T. Freeman, "Understanding and
+       Evaluating Blind Deconvolution Algorithms", CVPR 2009.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+
+import numpy as np
+import torch
+
+from .. import devices
+from ..blur import validate_lightfield
+from ..path import bezier_positions, canonical_time_direction, center_path
+from ..progress import Progress, run_to_completion
+from ._alternating import iter_alternating, relay
+from ._disparity import gray, shear
+from ._joint import iter_joint
+from ._memory import TILE_MARGIN, estimate_blind_memory, plan_tiles, tiles
+from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams
+
+__all__ = [
+    "BlindParams",
+    "LatentParams",
+    "PathFitParams",
+    "JointParams",
+    "BlindResult",
+    "PRESETS",
+    "blind_deblur",
+    "iter_blind_deblur",
+    "estimate_blind_memory",
+]
+
+
+def blind_deblur(
+    blurred,
+    *,
+    params: BlindParams | dict | str | None = None,
+    infinity_disparity: float = 0.0,
+    device="auto",
+    seed: int = 0,
+    callback=None,
+    **overrides,
+) -> BlindResult:
+    """Estimate the camera path and the sharp light field of a motion-blurred light field.
+
+    Parameters
+    ----------
+    blurred : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
+        The blurred light field (docs/model.md layout), computed in float32.
+    params : BlindParams, dict or str, optional
+        Parameters, a dict of them (nested fields as sub-dicts), or a preset
+        name (``'default'``, ``'paper'``). Default: the ``default`` preset.
+    infinity_disparity : float, default 0.0
+        ``d_inf`` in px/view of the blur model.
+    device : {'auto', 'cpu', 'cuda'}, default 'auto'
+        Falls back to the CPU, with a warning, when the GPU lacks the memory.
+    seed : int, default 0
+        Seed of the random parts (initial paths); equal seeds give equal results.
+    callback : callable, optional
+        Called with each :class:`~napari_lfdeblur.progress.Progress` record.
+    **overrides
+        Fields of :class:`BlindParams` to change, as in
+        :meth:`BlindParams.replace` (e.g. ``n_control_points=3``,
+        ``latent={"edge_anisotropy": 0.6}``).
+
+    Returns
+    -------
+    BlindResult
+        ``.lightfield`` (input shape, float32), ``.control_points`` ((n, 3),
+        zero-mean gauge), ``.loss_history``, ``.params``, ``.timings``.
+
+    Raises
+    ------
+    ValueError
+        On a malformed light field (wrong ndim, NaN) or invalid parameter values.
+    TypeError
+        On an unknown keyword or parameter of the wrong type.
+    """
+    gen = iter_blind_deblur(blurred, params=params, infinity_disparity=infinity_disparity, device=device,
+                            seed=seed, **overrides)
+    return run_to_completion(gen, callback)
+
+
+def iter_blind_deblur(
+    blurred,
+    *,
+    params: BlindParams | dict | str | None = None,
+    infinity_disparity: float = 0.0,
+    device="auto",
+    seed: int = 0,
+    **overrides,
+):
+    """Blind deblurring as a generator: yields progress, returns a :class:`BlindResult`.
+
+    Takes the arguments of :func:`blind_deblur`. Arguments are checked when
+    the generator is created; closing it stops the work at the next yield:
+    records come after every conjugate-gradient iteration of the latent
+    (one forward and one adjoint blur), every few Adam steps of the path
+    fit, every alternation and every iteration of the final solve.
+
+    Yields
+    ------
+    Progress
+        ``stage`` names the stage (``'path (level i/n, YxX)'``, ``'final'``),
+        ``control_points`` the current path (in every record). ``estimate()``
+        computes the current light-field estimate (input shape, float32; in
+        the path stage the grayscale latent, upsampled, placed in the full
+        frame and repeated over the channels); wrap the generator in
+        :func:`~napari_lfdeblur.progress.with_previews` to get ``preview``
+        arrays. In the path stage ``iteration`` counts the records of the
+        level out of ``n_iterations`` (an alternation ending early jumps to
+        its end); ``loss`` is the path fit at the end of an alternation
+        (``info['phase'] == 'done'``) and NaN on the records inside one
+        (``info['phase']`` ``'latent'`` or ``'path fit'``, with the current
+        best fit in ``info['fit']``).
+
+    Returns
+    -------
+    BlindResult
+    """
+    arr, d_inf = _validate_input(blurred, infinity_disparity)
+    p = _make_params(params, overrides)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed must be an integer; got {seed!r}")
+    dev = devices.select_device(device)
+    need = estimate_blind_memory(arr.shape, p)
+    dev = devices.plan_device(dev, need, tiles_possible=True)
+    tile = plan_tiles(arr.shape, p, devices.free_memory(dev))
+    if tile is not None:
+        warnings.warn(
+            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than is "
+            f"available: estimating the path on the central {tile[0]}x{tile[1]} pixels and restoring the light "
+            f"field in overlapping tiles of {tile[0]}x{tile[1]}",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    return devices.run_with_cpu_fallback(lambda d: _run(arr, d_inf, p, d, int(seed), tile), dev)
+
+
+def _validate_input(blurred, infinity_disparity):
+    arr = validate_lightfield(blurred, "blurred light field")
+    V, U, Y, X = arr.shape[:4]
+    if V < 2 or U < 2:
+        raise ValueError(f"blind deblurring needs at least 2 x 2 views; got {V} x {U}")
+    if Y < 4 or X < 4:
+        raise ValueError(f"blind deblurring needs views of at least 4 x 4 pixels; got {Y} x {X}")
+    if isinstance(infinity_disparity, bool) or not isinstance(infinity_disparity, (int, float, np.integer,
+                                                                                   np.floating)):
+        raise TypeError(f"infinity_disparity must be a number; got {infinity_disparity!r}")
+    d_inf = float(infinity_disparity)
+    if not math.isfinite(d_inf):
+        raise ValueError("infinity_disparity must be finite")
+    return arr, d_inf
+
+
+def _make_params(params, overrides) -> BlindParams:
+    if params is None:
+        params = PRESETS["default"]
+    elif isinstance(params, str):
+        params = BlindParams.preset(params)
+    elif isinstance(params, dict):
+        params = BlindParams.from_dict(params)
+    elif not isinstance(params, BlindParams):
+        raise TypeError(f"params must be a BlindParams, a dict or a preset name; got {type(params).__name__}")
+    if overrides:
+        params = params.replace(**overrides)
+    return params
+
+
+@torch.no_grad()
+def _preview(latent: torch.Tensor, fac: int, shape, unshear: float, offset=(0, 0)) -> np.ndarray:
+    """A path-stage latent (V, U, y, x, 1) at level ``fac`` as a light field of the input's ``shape``.
+
+    Nearest upsampling, placed at ``offset`` (the top-left pixel of the crop
+    the path is estimated on) and edge-padded to the full size, the refocus
+    of the path stage undone when ``unshear`` is not 0, clipped to [0, 1]
+    and repeated over the colour channels: float32, ``shape``.
+    """
+    V, U, Y, X = shape[:4]
+    lat = latent.detach()[..., 0]
+    if fac > 1:
+        lat = lat.repeat_interleave(fac, dim=2).repeat_interleave(fac, dim=3)
+    y, x = lat.shape[2:4]
+    if (y, x) != (Y, X):
+        oy, ox = offset
+        lat = torch.nn.functional.pad(lat.reshape(V * U, 1, y, x), (ox, X - x - ox, oy, Y - y - oy),
+                                      mode="replicate")
+        lat = lat.reshape(V, U, Y, X)
+    if unshear != 0.0:
+        lat = shear(lat[..., None], -unshear)[..., 0]
+    out = lat.clamp(0.0, 1.0).to(device="cpu", dtype=torch.float32).numpy()
+    if len(shape) == 5:
+        out = np.repeat(out[..., None], shape[4], axis=-1)
+    return np.ascontiguousarray(out, dtype=np.float32)
+
+
+def _central_crop(arr, tile):
+    """The central crop (tile plus margins) the path is estimated on when working in tiles, and its offset."""
+    if tile is None:
+        return arr, (0, 0)
+    Y, X = arr.shape[2:4]
+    cy, cx = min(Y, tile[0] + 2 * TILE_MARGIN), min(X, tile[1] + 2 * TILE_MARGIN)
+    offset = ((Y - cy) // 2, (X - cx) // 2)
+    return arr[:, :, offset[0] : offset[0] + cy, offset[1] : offset[1] + cx], offset
+
+
+def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
+    t0 = time.perf_counter()
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    V, U, Y, X = arr.shape[:4]
+    box = p.max_extent if p.max_extent > 0 else max(0.5, 0.35 * (min(V, U) - 1))
+    crop, offset = _central_crop(arr, tile)  # the path is the same everywhere
+    f = torch.as_tensor(np.ascontiguousarray(crop), dtype=torch.float32, device=dev)
+    if arr.ndim == 4:
+        f = f.unsqueeze(-1)
+    g = gray(f).contiguous()
+    sheared = p.method == "alternating" and d_inf != 0.0
+
+    def preview(latent, fac):
+        return _preview(latent, fac, arr.shape, d_inf if sheared else 0.0, offset)
+
+    if p.method == "alternating":
+        if sheared:
+            g = shear(g, d_inf)  # the path fit then uses the d_inf = 0 model
+        est = yield from iter_alternating(g, p, dev, rng, box, preview)
+    else:
+        est = yield from iter_joint(g, d_inf, p, dev, rng, box, preview)
+    info = {"device": str(dev), "box": box, **est.info}
+    info["levels"] = [(crop.shape[2] // k, crop.shape[3] // k) for k in est.factors]
+    cp = est.control_points
+    if crop is not arr:
+        # p_z in the crop's normalised coordinates -> the full frame's (x~ scales by r_crop / r_full)
+        cp = np.array(cp, dtype=np.float64)
+        cp[:, 2] *= max(Y, X) / max(crop.shape[2], crop.shape[3])
+        info["tile"] = tuple(tile)
+    cp = canonical_time_direction(center_path(cp, p.n_times))
+    t1 = time.perf_counter()
+    del g, f
+    if p.final is not None:
+        out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages)
+    else:
+        out = np.asarray(arr, dtype=np.float32).copy()
+    t2 = time.perf_counter()
+    return BlindResult(lightfield=np.asarray(out, dtype=np.float32), control_points=cp, loss_history=est.loss_history,
+                       params=p, timings={"path": t1 - t0, "final": t2 - t1, "total": t2 - t0}, info=info)
+
+
+def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
+    """The final non-blind stage, all channels at once (tile by tile when memory is short)."""
+    from ..deconvolution import iter_deconvolve
+
+    Y, X = arr.shape[2:4]
+    if tile is None:
+        parts = [((slice(None), slice(None)), (slice(None), slice(None)))]
+        out = None
+    else:
+        reach = float(np.abs(bezier_positions(cp, p.final_n_times)).sum(axis=1).max())  # |p_x| + |p_y| + |p_z|
+        parts = list(tiles(Y, X, tile, TILE_MARGIN + int(math.ceil(abs(d_inf) * reach))))
+        out = np.array(arr, dtype=np.float32)  # restored tile by tile; the rest shows as blurred meanwhile
+    n_iter = p.final.n_iter
+    for i, (core, pad) in enumerate(parts):
+        y0, x0 = pad[0].start or 0, pad[1].start or 0
+        gen = iter_deconvolve(arr[:, :, pad[0], pad[1]], cp, n_times=p.final_n_times, infinity_disparity=d_inf,
+                              device=dev, params=p.final, frame=None if tile is None else (y0, x0, Y, X))
+        inner = None
+        if tile is not None:
+            inner = (slice(core[0].start - y0, core[0].stop - y0), slice(core[1].start - x0, core[1].stop - x0))
+
+        def relabel(rec, i=i, core=core, inner=inner):
+            return Progress(stage="final" if tile is None else f"final (tile {i + 1}/{len(parts)})",
+                            iteration=i * n_iter + rec.iteration, n_iterations=n_iter * len(parts), loss=rec.loss,
+                            control_points=cp,
+                            estimate=_tile_estimate(rec, out, core, inner), stage_index=n_path,
+                            n_stages=n_path + 1, info=rec.info)
+
+        res = yield from relay(gen, relabel)
+        if tile is None:
+            out = res
+        else:
+            out[:, :, core[0], core[1]] = res[:, :, inner[0], inner[1]]
+    return out
+
+
+def _tile_estimate(rec: Progress, out, core, inner):
+    """The estimate of a final-stage record: the tile's estimate placed in the full frame (when tiled)."""
+    if rec.estimate is None or out is None:
+        return rec.estimate
+
+    def estimate():
+        full = out.copy()
+        full[:, :, core[0], core[1]] = rec.estimate()[:, :, inner[0], inner[1]]
+        return full
+
+    return estimate
+

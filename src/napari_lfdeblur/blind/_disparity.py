@@ -1,0 +1,100 @@
+"""Disparity of the blurred light field, and the pixel weights of the path fit drawn from it.
+
+Also the light-field resampling the path stage shares: grayscale, refocus
+(shear) and spatial area-averaging.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from ..blur import lerp_taps
+
+__all__ = ["gray", "shear", "downsample", "disparity_map", "disparity_weights", "DISPARITY_PIXELS",
+           "DISPARITY_FLOOR"]
+
+#: pixels (about) on which the disparity map of the fit's weights is estimated; larger views are
+#: area-averaged down to it (the weights depend on |d| / max|d| only, which this keeps)
+DISPARITY_PIXELS = 160 * 160
+#: floor of the disparity weights of the fit's pixels (relative to the largest |d|)
+DISPARITY_FLOOR = 0.02
+
+
+def gray(f: torch.Tensor) -> torch.Tensor:
+    """The mean over the colour axis of (V, U, Y, X, C), kept as a length-1 axis."""
+    return f.mean(dim=-1, keepdim=True)
+
+
+def shear(f: torch.Tensor, d: float) -> torch.Tensor:
+    """Refocus: view ``(v, u)`` resampled at ``(y + d v_c, x + d u_c)`` (bilinear, replicate).
+
+    ``f`` is (V, U, Y, X, C); ``v_c, u_c`` are the view offsets from the
+    centre. With ``d = d_inf`` this maps the blur model with ``d_inf`` to the
+    one with ``d_inf = 0`` (up to interpolation): the path estimate runs on
+    the sheared light field.
+    """
+    V, U, Y, X, C = f.shape
+    out = torch.empty_like(f)
+    ys = torch.arange(Y, dtype=f.dtype, device=f.device)
+    xs = torch.arange(X, dtype=f.dtype, device=f.device)
+    for v in range(V):
+        y0, y1, wy = lerp_taps(ys + d * (v - (V - 1) / 2.0), Y)
+        rows = (f[v].index_select(1, y0) * (1 - wy)[None, :, None, None]
+                + f[v].index_select(1, y1) * wy[None, :, None, None])
+        for u in range(U):
+            x0, x1, wx = lerp_taps(xs + d * (u - (U - 1) / 2.0), X)
+            out[v, u] = (rows[u].index_select(1, x0) * (1 - wx)[None, :, None]
+                         + rows[u].index_select(1, x1) * wx[None, :, None])
+    return out
+
+
+def downsample(f: torch.Tensor, factor: int) -> torch.Tensor:
+    """Area-average the spatial axes of (V, U, Y, X, C) by ``factor`` (views untouched)."""
+    if factor == 1:
+        return f
+    V, U, Y, X, C = f.shape
+    Yc, Xc = (Y // factor) * factor, (X // factor) * factor
+    g = f[:, :, :Yc, :Xc].reshape(V, U, Yc // factor, factor, Xc // factor, factor, C)
+    return g.mean(dim=(3, 5))
+
+
+@torch.no_grad()
+def disparity_map(f: torch.Tensor, d_max: float = 2.5, n: int = 41, smooth: int = 2) -> np.ndarray:
+    """Per-pixel disparity (px/view) of a (blurred) light field (V, U, Y, X, 1).
+
+    The shear, among ``n`` in ``[-d_max, d_max]``, that makes the views agree
+    best (least angular variance, box-smoothed over ``2 smooth + 1`` px).
+    An in-plane blur keeps the views consistent at the scene's disparity.
+
+    Returns
+    -------
+    ndarray, float32, shape (Y, X)
+    """
+    best = torch.full(f.shape[2:4], math.inf, dtype=f.dtype, device=f.device)
+    arg = torch.zeros_like(best)
+    for d in np.linspace(-d_max, d_max, n):
+        var = shear(f, float(d)).var(dim=(0, 1))[..., 0]  # (Y, X)
+        var = torch.nn.functional.avg_pool2d(var[None, None], 2 * smooth + 1, stride=1, padding=smooth,
+                                             count_include_pad=False)[0, 0]
+        better = var < best
+        best = torch.where(better, var, best)
+        arg = arg.masked_fill(better, float(d))
+    return arg.cpu().numpy()
+
+
+def disparity_weights(f: torch.Tensor, power: float) -> np.ndarray:
+    """Pixel weights ``(|d| / max|d| + DISPARITY_FLOOR) ** power`` of the path fit, (Y, X) float64.
+
+    ``d`` is :func:`disparity_map` of ``f`` (V, U, Y, X, 1), estimated on views
+    area-averaged down to about :data:`DISPARITY_PIXELS` pixels and repeated
+    back to full size.
+    """
+    Y, X = f.shape[2:4]
+    k = max(1, int(math.sqrt(Y * X / DISPARITY_PIXELS)))
+    d = np.abs(disparity_map(downsample(f, k)))
+    w = (d / max(float(d.max()), 1e-6) + DISPARITY_FLOOR) ** power
+    w = np.repeat(np.repeat(w, k, axis=0), k, axis=1)
+    return np.pad(w, ((0, Y - w.shape[0]), (0, X - w.shape[1])), mode="edge")

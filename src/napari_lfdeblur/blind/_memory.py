@@ -1,0 +1,94 @@
+"""Memory of blind deblurring: a peak estimate, the tile plan when it does not fit, the tiles."""
+
+from __future__ import annotations
+
+from ._params import BlindParams
+
+__all__ = ["estimate_blind_memory", "plan_tiles", "tiles", "TILE_MARGIN", "MIN_TILE"]
+
+#: overlap (px) of neighbouring tiles in the final stage, on top of what ``d_inf`` shifts
+TILE_MARGIN = 12
+#: smallest tile side (px) worth working on
+MIN_TILE = 32
+
+
+def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
+    """A rough upper estimate of the peak memory of blind deblurring, in bytes.
+
+    Counts the light-field-sized float32 tensors alive at once in the final
+    (colour) TV stage and in the grayscale path stage, plus the blur
+    operator's blocks and interpolation tables.
+
+    Parameters
+    ----------
+    shape : tuple, (V, U, Y, X[, C])
+    params : BlindParams, optional
+
+    Returns
+    -------
+    int
+    """
+    p = params or BlindParams()
+    shape = tuple(int(s) for s in shape)
+    V, U, Y, X = shape[:4]
+    C = shape[4] if len(shape) == 5 else 1
+    n = V * U * Y * X
+    final = n * C * 4 * 12  # f, x, x_new, residual, gradient, 4 dual fields, temporaries
+    path = n * 4 * 16  # f, latent, CG vectors, gradients and autograd buffers (grayscale)
+    tables = 4 * max(p.n_times, p.final_n_times) * (X * U * U + Y * V * V) * 2
+    blocks = 4 * (1 << 22) * 3
+    return int(max(final, path) + tables + blocks + 64 * 2**20)
+
+
+def plan_tiles(shape, params: BlindParams | None, free: int | None):
+    """The tile size ``(ty, tx)`` to work in when the whole light field does not fit, else None.
+
+    The largest square-ish tiles (plus :data:`TILE_MARGIN` on each side) whose
+    :func:`estimate_blind_memory` fits in ``free`` bytes, after the full-size
+    result is set aside. None when ``free`` is unknown or enough.
+
+    Parameters
+    ----------
+    shape : tuple, (V, U, Y, X[, C])
+    params : BlindParams, optional
+    free : int or None
+        Bytes available.
+
+    Returns
+    -------
+    tuple of 2 int, or None
+    """
+    p = params or BlindParams()
+    shape = tuple(int(v) for v in shape)
+    if free is None or estimate_blind_memory(shape, p) <= free:
+        return None
+    V, U, Y, X = shape[:4]
+    C = shape[4] if len(shape) == 5 else 1
+    budget = free - 4 * V * U * Y * X * C  # the result, full size
+
+    def need(side):
+        ty, tx = min(Y, side + 2 * TILE_MARGIN), min(X, side + 2 * TILE_MARGIN)
+        return estimate_blind_memory((V, U, ty, tx, C), p)
+
+    side = max(Y, X)
+    while side > MIN_TILE and need(side) > budget:
+        side = max(MIN_TILE, int(side * 0.8))
+    return min(Y, side), min(X, side)
+
+
+def tiles(Y: int, X: int, tile, margin: int):
+    """``(core, padded)`` slices (y, x) covering a Y x X image with tiles of ``tile`` and ``margin``.
+
+    Yields
+    ------
+    core, padded : tuple of 2 slice
+        The tile itself (the tiles cover the image exactly once) and the
+        tile grown by ``margin`` on each side, clipped to the image.
+    """
+    ty, tx = tile
+    for y0 in range(0, Y, ty):
+        for x0 in range(0, X, tx):
+            y1, x1 = min(Y, y0 + ty), min(X, x0 + tx)
+            py0, px0 = max(0, y0 - margin), max(0, x0 - margin)
+            py1, px1 = min(Y, y1 + margin), min(X, x1 + margin)
+            yield (slice(y0, y1), slice(x0, x1)), (slice(py0, py1), slice(px0, px1))
