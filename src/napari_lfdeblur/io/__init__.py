@@ -155,9 +155,9 @@ def probe_layout(path) -> str | None:
 
             return layout if len(npy_header(p)[0]) in (4, 5) else None
         if layout == "npz":
-            from ._arrays import _npz_headers, npz_lightfield_key
+            from ._arrays import npz_headers, npz_lightfield_key
 
-            headers = _npz_headers(p)
+            headers = npz_headers(p)
             key = npz_lightfield_key(p, headers)
             return layout if key is not None and len(headers[key][0]) in (4, 5) else None
         if layout == "tiff":
@@ -176,9 +176,9 @@ def probe_layout(path) -> str | None:
                 name = h5_lightfield_name(f)
                 return layout if name is not None and f[name].ndim in (4, 5) else None
         if layout == "mat":
-            from ._matlab import _is_hdf5
+            from ._matlab import is_hdf5
 
-            if _is_hdf5(p):
+            if is_hdf5(p):
                 import h5py
 
                 with h5py.File(p, "r") as f:

@@ -114,7 +114,19 @@ def read_npy(path, *, axes=None, grid=None, value_range=None, max_bytes=None):
     return _finish(raw, path, {"layout": "npy"}, axes, value_range, grid)
 
 
-def _npz_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+def npz_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Shape and dtype of each array in an .npz, from the headers, without reading the data.
+
+    Parameters
+    ----------
+    path : Path
+        The .npz file.
+
+    Returns
+    -------
+    dict
+        Array name (without ``.npy``) to ``(shape, dtype)``.
+    """
     out = {}
     with zipfile.ZipFile(path) as zf:
         for info in zf.infolist():
@@ -133,7 +145,7 @@ def _npz_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
 def npz_lightfield_key(path, headers=None) -> str | None:
     """The key of the light field in an .npz: ``lf`` (or ``LF``), or the only
     4D/5D array. None when there is none."""
-    headers = _npz_headers(Path(path)) if headers is None else headers
+    headers = npz_headers(Path(path)) if headers is None else headers
     for k in ("lf", "LF"):
         if k in headers:
             return k
@@ -149,7 +161,7 @@ def npz_lightfield_key(path, headers=None) -> str | None:
 def read_npz(path, *, key=None, axes=None, grid=None, value_range=None, max_bytes=None):
     path = Path(path)
     try:
-        headers = _npz_headers(path)
+        headers = npz_headers(path)
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
     if key is None:

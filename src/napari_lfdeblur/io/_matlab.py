@@ -41,7 +41,8 @@ def _small_metadata(obj, depth=0):
     return None
 
 
-def _is_hdf5(path: Path) -> bool:
+def is_hdf5(path: Path) -> bool:
+    """Whether ``path`` is an HDF5 file (a MATLAB v7.3 ``.mat``), from its first 1024 bytes."""
     with open(path, "rb") as fh:
         head = fh.read(1024)
     # MATLAB v7.3 files start with a 512-byte text header, then the HDF5 signature
@@ -65,7 +66,7 @@ def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_byt
     """
     path = Path(path)
     meta: dict = {"layout": "mat", "variable": variable}
-    if _is_hdf5(path):
+    if is_hdf5(path):
         import h5py
 
         try:

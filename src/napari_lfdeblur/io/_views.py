@@ -100,83 +100,110 @@ def _parse_cfg(path: Path) -> dict:
     return out
 
 
-def _map_views(folder: Path, scheme: str, pattern=None, index_base=None, grid=None):
-    """Map (row, col), 0-based, to file names. Returns (mapping, (V, U), info)."""
-    names = _image_files(folder)
-    info: dict = {}
+def _add_view(views: dict, dup: list, key: tuple[int, int], name: str) -> None:
+    """Record ``name`` as view ``key``, or note it in ``dup`` when the view is taken."""
+    if key in views:
+        dup.append(f"{views[key]} and {name}")
+    else:
+        views[key] = name
+
+
+def _pattern_views(names, pattern, index_base):
+    """Views named by a user regex (groups ``row``/``col`` or the first two groups), 1-based by default."""
+    rx = re.compile(pattern) if isinstance(pattern, str) else pattern
+    base = 1 if index_base is None else int(index_base)
     views: dict[tuple[int, int], str] = {}
     dup: list[str] = []
+    for n in names:
+        m = rx.search(n)
+        if m:
+            gd = m.groupdict()
+            r, c = (gd["row"], gd["col"]) if "row" in gd and "col" in gd else m.groups()[:2]
+            _add_view(views, dup, (int(r) - base, int(c) - base), n)
+    return views, dup
 
-    def put(key, name):
-        if key in views:
-            dup.append(f"{views[key]} and {name}")
-        else:
-            views[key] = name
 
-    if pattern is not None:
-        rx = re.compile(pattern) if isinstance(pattern, str) else pattern
-        base = 1 if index_base is None else int(index_base)
-        for n in names:
-            m = rx.search(n)
-            if m:
-                gd = m.groupdict()
-                r, c = (gd["row"], gd["col"]) if "row" in gd and "col" in gd else m.groups()[:2]
-                put((int(r) - base, int(c) - base), n)
-    elif scheme == "hci":
-        idx = {}
-        for n in names:
-            m = _HCI.match(n)
-            if m:
-                k = int(m.group(1))
-                if k in idx:
-                    dup.append(f"{idx[k]} and {n}")
-                idx[k] = n
-        total = max(idx) + 1
-        if grid is not None:
-            V, U = (int(g) for g in grid)
-        else:
-            side = math.isqrt(total)
-            if side * side != total:
-                raise LightFieldFormatError(
-                    f"{folder}: {len(idx)} HCI views input_CamNNN with indices up to {total - 1} do not form a "
-                    f"square grid; pass grid=(V, U) if the grid is not square"
-                )
-            V = U = side
-        for k, n in idx.items():
-            if k >= V * U:
-                raise LightFieldFormatError(f"{folder}: {n} is outside the {V}x{U} grid")
-            put((k // U, k % U), n)
-        cfg = folder / "parameters.cfg"
-        if cfg.is_file():
-            info["camera"] = _parse_cfg(cfg)
-    elif scheme == "stanford":
-        base = 0 if index_base is None else int(index_base)
-        positions = {}
-        for n in names:
-            m = _STANFORD.match(n)
-            if m:
-                key = (int(m.group(1)) - base, int(m.group(2)) - base)
-                put(key, n)
-                if m.group(3) is not None:
-                    try:
-                        positions[key] = (float(m.group(3)), float(m.group(4)))
-                    except ValueError:
-                        pass
-        if positions:
-            info["camera_positions"] = positions
-    else:  # rc
-        parsed = []
-        for n in names:
-            m = _RC.match(n)
-            if m:
-                parsed.append((int(m.group(1)), int(m.group(2)), n))
-        if index_base is None:
-            base = 0 if any(r == 0 or c == 0 for r, c, _ in parsed) else 1
-        else:
-            base = int(index_base)
-        info["index_base"] = base
-        for r, c, n in parsed:
-            put((r - base, c - base), n)
+def _hci_views(folder: Path, names, grid):
+    """HCI ``input_CamNNN`` views, row-major on a square grid unless ``grid=(V, U)``.
+
+    Returns ``(views, duplicates, (V, U))``; raises when the indices do not
+    fit the grid.
+    """
+    idx = {}
+    dup: list[str] = []
+    for n in names:
+        m = _HCI.match(n)
+        if m:
+            k = int(m.group(1))
+            if k in idx:
+                dup.append(f"{idx[k]} and {n}")
+            idx[k] = n
+    total = max(idx) + 1
+    if grid is not None:
+        V, U = (int(g) for g in grid)
+    else:
+        side = math.isqrt(total)
+        if side * side != total:
+            raise LightFieldFormatError(
+                f"{folder}: {len(idx)} HCI views input_CamNNN with indices up to {total - 1} do not form a "
+                f"square grid; pass grid=(V, U) if the grid is not square"
+            )
+        V = U = side
+    views: dict[tuple[int, int], str] = {}
+    for k, n in idx.items():
+        if k >= V * U:
+            raise LightFieldFormatError(f"{folder}: {n} is outside the {V}x{U} grid")
+        _add_view(views, dup, (k // U, k % U), n)
+    return views, dup, (V, U)
+
+
+def _stanford_views(names, index_base):
+    """Stanford ``out_RR_CC_<y>_<x>_`` views, 0-based by default, and the camera positions in the names."""
+    base = 0 if index_base is None else int(index_base)
+    views: dict[tuple[int, int], str] = {}
+    dup: list[str] = []
+    positions = {}
+    for n in names:
+        m = _STANFORD.match(n)
+        if m:
+            key = (int(m.group(1)) - base, int(m.group(2)) - base)
+            _add_view(views, dup, key, n)
+            if m.group(3) is not None:
+                try:
+                    positions[key] = (float(m.group(3)), float(m.group(4)))
+                except ValueError:
+                    pass
+    return views, dup, positions
+
+
+def _rc_views(names, index_base):
+    """``..._RR_CC`` views: 0-based when some index is 0, else 1-based, unless ``index_base`` is given.
+
+    Returns ``(views, duplicates, base)``.
+    """
+    parsed = []
+    for n in names:
+        m = _RC.match(n)
+        if m:
+            parsed.append((int(m.group(1)), int(m.group(2)), n))
+    if index_base is None:
+        base = 0 if any(r == 0 or c == 0 for r, c, _ in parsed) else 1
+    else:
+        base = int(index_base)
+    views: dict[tuple[int, int], str] = {}
+    dup: list[str] = []
+    for r, c, n in parsed:
+        _add_view(views, dup, (r - base, c - base), n)
+    return views, dup, base
+
+
+def _check_grid(folder: Path, scheme: str, views: dict, dup: list, shape, missing_name) -> tuple[int, int]:
+    """Check that ``views`` fill a grid exactly once; return its ``(V, U)``.
+
+    ``shape`` is ``(V, U)`` (the numbers are converted with ``int``), or None
+    to take the grid from the largest indices. ``missing_name(r, c, U)``
+    names a missing view in the message.
+    """
     if dup:
         raise LightFieldFormatError(
             f"{folder}: several files give the same view: {'; '.join(dup[:3])}; keep one light field "
@@ -186,26 +213,57 @@ def _map_views(folder: Path, scheme: str, pattern=None, index_base=None, grid=No
         raise LightFieldFormatError(f"{folder}: no view file names match the {scheme!r} naming scheme")
     if min(min(k) for k in views) < 0:
         raise LightFieldFormatError(f"{folder}: view indices below the index base; pass index_base=0")
-    if grid is not None and scheme != "hci":
-        V, U = (int(g) for g in grid)
-    elif scheme != "hci" or pattern is not None:
+    if shape is None:
         V = max(k[0] for k in views) + 1
         U = max(k[1] for k in views) + 1
+    else:
+        V, U = (int(g) for g in shape)
     outside = [n for k, n in views.items() if k[0] >= V or k[1] >= U]
     if outside:
         raise LightFieldFormatError(f"{folder}: {outside[0]} lies outside the {V}x{U} grid")
     missing = [(r, c) for r in range(V) for c in range(U) if (r, c) not in views]
     if missing:
-        if scheme == "hci" and pattern is None:
-            shown = ", ".join(f"input_Cam{r * U + c:03d}" for r, c in missing[:5])
-        else:
-            b = info.get("index_base", 0 if scheme == "stanford" else 1)
-            shown = ", ".join(f"({r + b}, {c + b})" for r, c in missing[:5])
+        shown = ", ".join(missing_name(r, c, U) for r, c in missing[:5])
         raise LightFieldFormatError(
             f"{folder}: {len(missing)} view(s) missing from the {V}x{U} grid: {shown}"
             f"{', ...' if len(missing) > 5 else ''}"
         )
-    return views, (V, U), info
+    return V, U
+
+
+def _map_views(folder: Path, scheme: str, pattern=None, index_base=None, grid=None):
+    """Map (row, col), 0-based, to file names. Returns (mapping, (V, U), info)."""
+    names = _image_files(folder)
+    info: dict = {}
+    shape = None
+    if pattern is not None:
+        views, dup = _pattern_views(names, pattern, index_base)
+    elif scheme == "hci":
+        views, dup, shape = _hci_views(folder, names, grid)
+        cfg = folder / "parameters.cfg"
+        if cfg.is_file():
+            info["camera"] = _parse_cfg(cfg)
+    elif scheme == "stanford":
+        views, dup, positions = _stanford_views(names, index_base)
+        if positions:
+            info["camera_positions"] = positions
+    else:  # rc
+        views, dup, info["index_base"] = _rc_views(names, index_base)
+    if grid is not None and scheme != "hci":
+        shape = grid
+
+    if scheme == "hci" and pattern is None:
+
+        def missing_name(r, c, U):
+            return f"input_Cam{r * U + c:03d}"
+
+    else:
+        b = info.get("index_base", 0 if scheme == "stanford" else 1)
+
+        def missing_name(r, c, U):
+            return f"({r + b}, {c + b})"
+
+    return views, _check_grid(folder, scheme, views, dup, shape, missing_name), info
 
 
 def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None, value_range=None,

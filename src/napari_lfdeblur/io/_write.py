@@ -30,11 +30,18 @@ _VIEW_NAME = re.compile(r"^view_\d+_\d+\.(png|tif)$")
 SIDECAR_NAMES = ("lightfield.json", "path.json")
 
 
-def _jsonable(obj):
+def jsonable(obj):
+    """A JSON-serialisable copy of ``obj``.
+
+    Dict keys become strings, tuples lists, numpy scalars Python numbers and
+    paths strings. Arrays of up to 4096 elements become nested lists, larger
+    ones a short ``"<array shape dtype>"`` description; any other object
+    becomes its ``repr``.
+    """
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
         return obj.tolist() if obj.size <= 4096 else f"<array {obj.shape} {obj.dtype}>"
     if isinstance(obj, np.generic):
@@ -57,6 +64,127 @@ def sidecar_path_json(path: Path, layout: str) -> Path:
     if layout == "views":
         return path / "path.json"
     return path.with_name(path.name[: -len(path.suffix)] + ".path.json" if path.suffix else path.name + ".path.json")
+
+
+def _layout_of(path: Path, layout: str | None) -> str:
+    """The write layout: ``layout`` if given (and known), else from the suffix of ``path``."""
+    if layout is None:
+        if path.suffix.lower() in _SUFFIX_LAYOUT:
+            layout = _SUFFIX_LAYOUT[path.suffix.lower()]
+        elif path.suffix == "" or path.is_dir():
+            layout = "views"
+        else:
+            raise LightFieldFormatError(
+                f"{path}: cannot tell the format from the suffix {path.suffix!r}; use .npz, .npy, .tif, .h5, "
+                f"a folder name without suffix, or pass layout= (one of {WRITE_LAYOUTS})"
+            )
+    if layout not in WRITE_LAYOUTS:
+        raise ValueError(f"unknown layout {layout!r}; choose one of {WRITE_LAYOUTS}")
+    return layout
+
+
+def _float_lightfield(lf, path: Path) -> np.ndarray:
+    """``lf`` checked and as float32 in [0, 1]; float data must be finite, integers are scaled."""
+    arr = validate_lightfield(lf, "light field to write")
+    if np.issubdtype(arr.dtype, np.floating):
+        if not np.isfinite(arr).all():
+            raise LightFieldFormatError(f"cannot write {path}: the light field contains NaN or Inf")
+        return arr.astype(np.float32, copy=False)
+    return to_float01(arr, "light field to write")
+
+
+def _sample_depth(layout: str, path: Path, bit_depth: int | None) -> int:
+    """Bits per sample: ``bit_depth``, or 8 for images and 32 (float) for array formats."""
+    if layout in ("views", "mosaic", "eslf"):
+        depth = 8 if bit_depth is None else bit_depth
+        if depth == 32 and (layout == "views" or path.suffix.lower() == ".png"):
+            raise ValueError("PNG stores 8 or 16 bits; use bit_depth=8 or 16, or a .tif/.npz for float32")
+        return depth
+    return 32 if bit_depth is None else bit_depth
+
+
+def _write_npz(path, data, meta, cp, *, overwrite, compress):
+    with atomic_file(path, overwrite=overwrite) as tmp:
+        extra = {METADATA_KEY: np.array(json.dumps(meta))}
+        if cp is not None:
+            extra["control_points"] = cp
+        with open(tmp, "wb") as fh:
+            (np.savez_compressed if compress else np.savez)(fh, lf=data, **extra)
+
+
+def _write_npy(path, data, meta, cp, *, overwrite, compress):
+    with atomic_file(path, overwrite=overwrite) as tmp:
+        with open(tmp, "wb") as fh:
+            np.save(fh, data, allow_pickle=False)
+
+
+def _write_tiff(path, data, meta, cp, *, overwrite, compress):
+    import tifffile
+
+    with atomic_file(path, overwrite=overwrite) as tmp:
+        tifffile.imwrite(
+            tmp,
+            data,
+            photometric="rgb" if data.ndim == 5 else "minisblack",
+            compression="zlib" if compress else None,
+            metadata={"lfdeblur_axes": "vuyxc"[: data.ndim], METADATA_KEY: json.dumps(meta)},
+        )
+
+
+def _write_h5(path, data, meta, cp, *, overwrite, compress):
+    import h5py
+
+    with atomic_file(path, overwrite=overwrite) as tmp:
+        with h5py.File(tmp, "w") as f:
+            ds = f.create_dataset(
+                "LF",
+                data=data,
+                chunks=(1, 1) + data.shape[2:],
+                compression="gzip" if compress else None,
+            )
+            ds.attrs["axes"] = "vuyxc"[: data.ndim]
+            ds.attrs[METADATA_KEY] = json.dumps(meta)
+            if cp is not None:
+                ds.attrs["control_points"] = cp
+
+
+def _write_mosaic(path, data, layout, *, overwrite):
+    """One image, ``.png`` or ``.tif``: the view grid (``'mosaic'``) or the lenslet mosaic (``'eslf'``)."""
+    if layout == "eslf" and data.shape[0] != data.shape[1]:
+        raise LightFieldFormatError(f"cannot write {path} as ESLF: it needs V == U, got {data.shape[:2]}")
+    img = lightfield_to_mosaic(data, "grid" if layout == "mosaic" else "eslf")
+    with atomic_file(path, overwrite=overwrite) as tmp:
+        if path.suffix.lower() in (".tif", ".tiff"):
+            import tifffile
+
+            tifffile.imwrite(tmp, img, photometric="rgb" if img.ndim == 3 else "minisblack")
+        elif path.suffix.lower() == ".png":
+            write_png(tmp, img)
+        else:
+            raise LightFieldFormatError(f"{path}: a mosaic is written as .png or .tif")
+
+
+def _replaceable(name: str) -> bool:
+    """Whether a file in an existing views folder is one that :func:`write_lightfield` writes."""
+    return bool(_VIEW_NAME.match(name)) or name in SIDECAR_NAMES
+
+
+def _write_views(path, data, meta, cp, *, overwrite):
+    """A folder of ``view_RR_CC.png`` (1-based), ``lightfield.json`` and, with a path, ``path.json``."""
+    V, U = data.shape[:2]
+    width = max(2, len(str(max(V, U))))
+    with atomic_dir(path, overwrite=overwrite, replaceable=_replaceable) as tmp:
+        for v in range(V):
+            for u in range(U):
+                write_png(tmp / f"view_{v + 1:0{width}d}_{u + 1:0{width}d}.png", data[v, u])
+        (tmp / "lightfield.json").write_text(json.dumps(meta, indent=2))
+        if cp is not None:
+            from ..path import save_path_json
+
+            save_path_json(tmp / "path.json", cp)
+
+
+_ARRAY_WRITERS = {"npz": _write_npz, "npy": _write_npy, "tiff": _write_tiff, "h5": _write_h5}
 
 
 def write_lightfield(
@@ -111,120 +239,40 @@ def write_lightfield(
     FileExistsError
         If the destination exists and ``overwrite`` is False.
     LightFieldFormatError
-        If ``lf`` is not a light field or contains NaN/Inf.
+        If ``lf`` is not a light field or contains NaN/Inf, or the format
+        cannot be told from the suffix.
+    ValueError
+        On an unknown ``layout`` or ``bit_depth``, or ``bit_depth=32`` for PNG.
     """
     path = Path(path)
-    if layout is None:
-        if path.suffix.lower() in _SUFFIX_LAYOUT:
-            layout = _SUFFIX_LAYOUT[path.suffix.lower()]
-        elif path.suffix == "" or path.is_dir():
-            layout = "views"
-        else:
-            raise LightFieldFormatError(
-                f"{path}: cannot tell the format from the suffix {path.suffix!r}; use .npz, .npy, .tif, .h5, "
-                f"a folder name without suffix, or pass layout= (one of {WRITE_LAYOUTS})"
-            )
-    if layout not in WRITE_LAYOUTS:
-        raise ValueError(f"unknown layout {layout!r}; choose one of {WRITE_LAYOUTS}")
+    layout = _layout_of(path, layout)
     if bit_depth not in (None, 8, 16, 32):
         raise ValueError(f"bit_depth must be 8, 16 or 32 (float), not {bit_depth!r}")
-
-    arr = validate_lightfield(lf, "light field to write")
-    if np.issubdtype(arr.dtype, np.floating):
-        if not np.isfinite(arr).all():
-            raise LightFieldFormatError(f"cannot write {path}: the light field contains NaN or Inf")
-        arr = arr.astype(np.float32, copy=False)
-    else:
-        arr = to_float01(arr, "light field to write")
+    arr = _float_lightfield(lf, path)
 
     cp = None
     if control_points is not None:
         from ..path import validate_control_points
 
         cp = validate_control_points(control_points)
-    meta = _jsonable({"axes": "vuyxc"[: arr.ndim], "shape": list(arr.shape), **(metadata or {})})
+    meta = jsonable({"axes": "vuyxc"[: arr.ndim], "shape": list(arr.shape), **(metadata or {})})
     if cp is not None:
         meta["control_points"] = cp.tolist()
     sidecar = sidecar_path_json(path, layout) if cp is not None else None
     if sidecar is not None and layout != "views":
         check_writable(sidecar, overwrite)
 
-    if layout in ("views", "mosaic", "eslf"):
-        depth = 8 if bit_depth is None else bit_depth
-        if depth == 32 and (layout == "views" or path.suffix.lower() == ".png"):
-            raise ValueError("PNG stores 8 or 16 bits; use bit_depth=8 or 16, or a .tif/.npz for float32")
-    else:
-        depth = 32 if bit_depth is None else bit_depth
+    depth = _sample_depth(layout, path, bit_depth)
     data = arr if depth == 32 else _quantize(arr, depth)
     meta["bit_depth"] = depth
 
-    if layout == "npz":
-        with atomic_file(path, overwrite=overwrite) as tmp:
-            extra = {METADATA_KEY: np.array(json.dumps(meta))}
-            if cp is not None:
-                extra["control_points"] = cp
-            with open(tmp, "wb") as fh:
-                (np.savez_compressed if compress else np.savez)(fh, lf=data, **extra)
-    elif layout == "npy":
-        with atomic_file(path, overwrite=overwrite) as tmp:
-            with open(tmp, "wb") as fh:
-                np.save(fh, data, allow_pickle=False)
-    elif layout == "tiff":
-        import tifffile
-
-        with atomic_file(path, overwrite=overwrite) as tmp:
-            tifffile.imwrite(
-                tmp,
-                data,
-                photometric="rgb" if data.ndim == 5 else "minisblack",
-                compression="zlib" if compress else None,
-                metadata={"lfdeblur_axes": "vuyxc"[: data.ndim], METADATA_KEY: json.dumps(meta)},
-            )
-    elif layout == "h5":
-        import h5py
-
-        with atomic_file(path, overwrite=overwrite) as tmp:
-            with h5py.File(tmp, "w") as f:
-                ds = f.create_dataset(
-                    "LF",
-                    data=data,
-                    chunks=(1, 1) + data.shape[2:],
-                    compression="gzip" if compress else None,
-                )
-                ds.attrs["axes"] = "vuyxc"[: data.ndim]
-                ds.attrs[METADATA_KEY] = json.dumps(meta)
-                if cp is not None:
-                    ds.attrs["control_points"] = cp
-    elif layout in ("mosaic", "eslf"):
-        if layout == "eslf" and arr.shape[0] != arr.shape[1]:
-            raise LightFieldFormatError(f"cannot write {path} as ESLF: it needs V == U, got {arr.shape[:2]}")
-        img = lightfield_to_mosaic(data, "grid" if layout == "mosaic" else "eslf")
-        with atomic_file(path, overwrite=overwrite) as tmp:
-            if path.suffix.lower() in (".tif", ".tiff"):
-                import tifffile
-
-                tifffile.imwrite(tmp, img, photometric="rgb" if img.ndim == 3 else "minisblack")
-            elif path.suffix.lower() == ".png":
-                write_png(tmp, img)
-            else:
-                raise LightFieldFormatError(f"{path}: a mosaic is written as .png or .tif")
-    else:  # views
-        V, U = data.shape[:2]
-        width = max(2, len(str(max(V, U))))
-
-        def replaceable(name):
-            return bool(_VIEW_NAME.match(name)) or name in SIDECAR_NAMES
-
-        with atomic_dir(path, overwrite=overwrite, replaceable=replaceable) as tmp:
-            for v in range(V):
-                for u in range(U):
-                    write_png(tmp / f"view_{v + 1:0{width}d}_{u + 1:0{width}d}.png", data[v, u])
-            (tmp / "lightfield.json").write_text(json.dumps(meta, indent=2))
-            if cp is not None:
-                from ..path import save_path_json
-
-                save_path_json(tmp / "path.json", cp)
+    if layout == "views":
+        _write_views(path, data, meta, cp, overwrite=overwrite)
         return path
+    if layout in ("mosaic", "eslf"):
+        _write_mosaic(path, data, layout, overwrite=overwrite)
+    else:
+        _ARRAY_WRITERS[layout](path, data, meta, cp, overwrite=overwrite, compress=compress)
     if sidecar is not None:
         from ..path import save_path_json
 
