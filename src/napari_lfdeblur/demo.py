@@ -9,6 +9,7 @@ writes the light fields, one figure per sample and a JSON summary.
 from __future__ import annotations
 
 import json
+from contextlib import contextmanager
 import time
 from pathlib import Path
 
@@ -98,6 +99,60 @@ def _blind_params(quick: bool):
     return params.replace(path={"n_outer": 2, "n_restarts": 1, "n_levels": 1}, final={"n_iter": 10}) if quick else params
 
 
+class _StepTimer:
+    """Times the demo's steps of one sample into ``seconds`` and advances the progress bar."""
+
+    def __init__(self, name, seconds, bar):
+        self.name, self.seconds, self.bar = name, seconds, bar
+
+    @contextmanager
+    def __call__(self, step):
+        if self.bar is not None:
+            self.bar.set_postfix_str(f"{self.name}: {step}")
+        t0 = time.perf_counter()
+        yield
+        self.seconds[step] = round(time.perf_counter() - t0, 2)
+        if self.bar is not None:
+            self.bar.update(1)
+
+
+def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> list:
+    """Blur one sample, restore it (known path, then blind), record the figures; returns the files written."""
+    from .deconvolution import deconvolve
+    from .io import write_lightfield
+    from .metrics import psnr, ssim
+
+    with timer("blur"):
+        blurred = simulate_blur(sharp, DEMO_PATH, n_times=RENDER_N_TIMES, device=device)
+        blurred = np.clip(blurred + rng.normal(0, NOISE_SIGMA, blurred.shape), 0, 1).astype(np.float32)
+        write_lightfield(out / f"{name}_blurred.npz", blurred, overwrite=True, control_points=DEMO_PATH)
+    files = [f"{name}_blurred.npz"]
+    results = {"blurred": blurred}
+    with timer("deconvolve"):
+        restored = deconvolve(blurred, DEMO_PATH, device=device, **({"n_iter": 30} if quick else {}))
+        write_lightfield(out / f"{name}_deconvolved.npz", restored, overwrite=True)
+    results["deconvolved (path known)"] = restored
+    files.append(f"{name}_deconvolved.npz")
+    est_cp = None
+    if blind:
+        from .blind import blind_deblur
+        from .metrics import path_error
+
+        with timer("blind"):
+            res = blind_deblur(blurred, params=_blind_params(quick), device=device, seed=0)
+            est_cp = res.control_points
+            write_lightfield(out / f"{name}_blind.npz", res.lightfield, overwrite=True, control_points=est_cp)
+        results["blind"] = res.lightfield
+        files.append(f"{name}_blind.npz")
+        rec["blind_control_points"] = np.asarray(est_cp).tolist()
+        rec["blind_path_error"] = path_error(est_cp, DEMO_PATH, lightfield=sharp).as_dict()
+    rec["psnr_db"] = {k: round(psnr(v, sharp, crop=CROP), 2) for k, v in results.items()}
+    rec["ssim"] = {k: round(ssim(v, sharp, crop=CROP), 4) for k, v in results.items()}
+    title = f"{name}: " + ", ".join(f"{k} {v:.1f} dB" for k, v in rec["psnr_db"].items())
+    _figure(out / f"{name}.png", sharp, results, DEMO_PATH, est_cp, title)
+    return files + [f"{name}.png"]
+
+
 def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: bool = True, progress=None):
     """Blur the built-in samples by a known path and restore them; write the results.
 
@@ -119,10 +174,6 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     dict
         The summary also written to ``summary.json``.
     """
-    from .deconvolution import deconvolve
-    from .io import write_lightfield
-    from .metrics import psnr, ssim
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(0)
@@ -136,56 +187,11 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     }
     files = []
     samples = _samples(quick)
-    n_steps = len(samples) * (3 if blind else 2)
-    bar = progress(total=n_steps, desc="demo") if progress else None
-
-    def begin(name, step):
-        if bar is not None:
-            bar.set_postfix_str(f"{name}: {step}")
-        return time.perf_counter()
-
-    def step_done(name, step, t0):
-        rec["seconds"][step] = round(time.perf_counter() - t0, 2)
-        if bar is not None:
-            bar.update(1)
-
+    bar = progress(total=len(samples) * (3 if blind else 2), desc="demo") if progress else None
     for name, (sharp, source) in samples.items():
         rec = summary["samples"][name] = {"source": source, "shape": list(sharp.shape), "seconds": {}}
-        t0 = begin(name, "blur")
-        blurred = simulate_blur(sharp, DEMO_PATH, n_times=RENDER_N_TIMES, device=device)
-        blurred = np.clip(blurred + rng.normal(0, NOISE_SIGMA, blurred.shape), 0, 1).astype(np.float32)
-        results = {"blurred": blurred}
-        write_lightfield(out / f"{name}_blurred.npz", blurred, overwrite=True, control_points=DEMO_PATH)
-        files.append(f"{name}_blurred.npz")
-        step_done(name, "blur", t0)
-
-        t0 = begin(name, "deconvolve")
-        restored = deconvolve(blurred, DEMO_PATH, device=device, **({"n_iter": 30} if quick else {}))
-        results["deconvolved (path known)"] = restored
-        write_lightfield(out / f"{name}_deconvolved.npz", restored, overwrite=True)
-        files.append(f"{name}_deconvolved.npz")
-        step_done(name, "deconvolve", t0)
-
-        est_cp = None
-        if blind:
-            from .blind import blind_deblur
-            from .metrics import path_error
-
-            t0 = begin(name, "blind")
-            res = blind_deblur(blurred, params=_blind_params(quick), device=device, seed=0)
-            est_cp = res.control_points
-            results["blind"] = res.lightfield
-            write_lightfield(out / f"{name}_blind.npz", res.lightfield, overwrite=True, control_points=est_cp)
-            files.append(f"{name}_blind.npz")
-            rec["blind_control_points"] = np.asarray(est_cp).tolist()
-            rec["blind_path_error"] = path_error(est_cp, DEMO_PATH, lightfield=sharp).as_dict()
-            step_done(name, "blind", t0)
-
-        rec["psnr_db"] = {k: round(psnr(v, sharp, crop=CROP), 2) for k, v in results.items()}
-        rec["ssim"] = {k: round(ssim(v, sharp, crop=CROP), 4) for k, v in results.items()}
-        title = f"{name}: " + ", ".join(f"{k} {v:.1f} dB" for k, v in rec["psnr_db"].items())
-        _figure(out / f"{name}.png", sharp, results, DEMO_PATH, est_cp, title)
-        files.append(f"{name}.png")
+        timer = _StepTimer(name, rec["seconds"], bar)
+        files += _run_sample(name, sharp, out, rng, rec, timer, device=device, quick=quick, blind=blind)
     if bar is not None:
         bar.close()
     files.append("summary.json")
