@@ -5,7 +5,7 @@
 - :class:`LayerChoice`: a combo box of the viewer's layers, kept in sync with it;
 - :class:`PathTable`: an editable ``(n, 3)`` table of Bezier control points;
 - :class:`PathSource`: take a path from another layer or a JSON file;
-- :func:`native`: a magicgui container around a plain Qt widget (the plots);
+- :func:`heading`: a section heading;
 - ``notify_*``: napari notifications.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, PushButton, SpinBox, Table
+from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox, Table
 from napari.utils.notifications import show_error, show_info, show_warning
 
 from ...path import load_path_json, validate_control_points
@@ -30,9 +30,9 @@ __all__ = [
     "device_choice",
     "fspin",
     "has_path",
+    "heading",
     "is_image",
     "is_lightfield",
-    "native",
     "notify_error",
     "notify_info",
     "notify_warning",
@@ -76,12 +76,9 @@ def device_choice() -> ComboBox:
                     tooltip="torch device: auto picks CUDA when available")
 
 
-def native(qwidget, name: str = "") -> Container:
-    """A magicgui container that shows a plain Qt widget (a matplotlib canvas)."""
-    box = Container(name=name, labels=False)
-    box.native.layout().addWidget(qwidget)
-    box.margins = (0, 0, 0, 0)
-    return box
+def heading(text: str) -> Label:
+    """A bold section heading."""
+    return Label(value=f"<b>{text}</b>")
 
 
 # ---------------------------------------------------------------- layers
@@ -168,6 +165,8 @@ class PathTable(Container):
         self.table = Table(name="table", tooltip="Bezier control points of the camera path "
                            "(units: docs/model.md); edit freely")
         self.table.min_height = 110
+        header = self.table.native.horizontalHeader()
+        header.setSectionResizeMode(header.ResizeMode.Stretch)
         self.add_button = PushButton(name="add_point", text="+ point")
         self.remove_button = PushButton(name="remove_point", text="- point")
         self.add_button.changed.connect(self._add_row)

@@ -49,6 +49,7 @@ class ProgressPanel(Container):
         self.status = Label(name="status", value="idle")
         super().__init__(name=name, widgets=[self.bar, self.status], labels=False)
         self.status.native.setWordWrap(True)
+        self.status.native.setMinimumHeight(2 * self.status.native.fontMetrics().lineSpacing() + 4)
         self.margins = (0, 0, 0, 0)
         self._t0 = None
         self.eta_seconds = None

@@ -30,7 +30,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, Label
+from magicgui.widgets import ComboBox, Label
 
 from ...path import validate_control_points
 from ..layers import (
@@ -42,7 +42,7 @@ from ..layers import (
     path_layer_data,
     remove_layer,
 )
-from ._controls import LayerChoice, device_choice, fspin, has_path, spin
+from ._controls import LayerChoice, device_choice, fspin, has_path, heading, spin
 from ._plots import LossPlot, PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -126,7 +126,7 @@ class BlindDeblurWidget(SolverWidget):
         self.loss_plot = LossPlot()
         self.epi = EpiPanel(napari_viewer)
         caption = Label(value="camera path (solid: estimate, dashed: true)")
-        self.assemble(after=[caption, self.plot, self.loss_plot, self.epi])
+        self.assemble(after=[heading("Path and loss"), caption, self.plot, self.loss_plot, self.epi])
         self.layer_combo.changed.connect(self._input_changed)
         self.form.preset.changed.connect(self._preset_changed)
         self._preset_changed()

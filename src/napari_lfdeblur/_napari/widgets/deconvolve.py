@@ -22,7 +22,7 @@ from __future__ import annotations
 from magicgui.widgets import ComboBox
 
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata
-from ._controls import PathSource, PathTable, device_choice, fspin, has_path, spin
+from ._controls import PathSource, PathTable, device_choice, fspin, has_path, heading, spin
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -59,7 +59,7 @@ class DeconvolveWidget(SolverWidget):
         self.table = PathTable()
         self.plot = PathPlot()
         self.epi = EpiPanel(napari_viewer)
-        self.assemble(before=[self.path_source, self.table, self.plot], after=[self.epi])
+        self.assemble(before=[heading("Camera path"), self.path_source, self.table, self.plot], after=[self.epi])
         self.layer_combo.changed.connect(self._input_changed)
         self.table.changed.connect(self._replot)
         self._input_changed()

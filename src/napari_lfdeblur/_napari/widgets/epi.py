@@ -11,10 +11,10 @@ sliders; clicks outside the light field (e.g. on an EPI) are ignored.
 from __future__ import annotations
 
 import numpy as np
-from magicgui.widgets import CheckBox, Container, Label, PushButton
+from magicgui.widgets import CheckBox, Container, PushButton
 
 from ..layers import LayerError, add_layer, epi_layer_data
-from ._controls import LayerChoice, is_lightfield, notify_error, spin
+from ._controls import LayerChoice, heading, is_lightfield, notify_error, spin
 
 __all__ = ["EpiPanel", "EpiWidget"]
 
@@ -45,8 +45,7 @@ class EpiPanel(Container):
         self.click_box = CheckBox(name="pick_by_clicking", text="pick by clicking", value=False,
                                   tooltip="click on the canvas to set y, x from the click "
                                   "(and v, u from the view sliders)")
-        title = Label(name="title", value="<b>Epipolar images</b>")
-        super().__init__(name=name, widgets=[title, self.layer_combo, picks, self.show_button, self.click_box],
+        super().__init__(name=name, widgets=[heading("Epipolar images"), self.layer_combo, picks, self.show_button, self.click_box],
                          labels=False)
         self.layer_combo.changed.connect(self._layer_changed)
         for box in boxes:

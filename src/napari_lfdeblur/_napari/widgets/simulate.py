@@ -21,7 +21,7 @@ from magicgui.widgets import ComboBox, Container, PushButton
 from ...path import preset_path, random_path
 from ...progress import Progress
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata, path_layer_data
-from ._controls import PathTable, device_choice, fspin, spin
+from ._controls import PathTable, device_choice, fspin, heading, spin
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -58,7 +58,7 @@ class SimulateBlurWidget(SolverWidget):
         self.table = PathTable(preset_path("linear", 2.0))
         self.plot = PathPlot()
         self.epi = EpiPanel(napari_viewer)
-        self.assemble(before=[self.path_form, self.table, self.plot], after=[self.epi])
+        self.assemble(before=[heading("Camera path"), self.path_form, self.table, self.plot], after=[self.epi])
         self.path_form.apply_preset.changed.connect(self.apply_preset)
         self.path_form.random.changed.connect(self.apply_random)
         self.table.changed.connect(self._replot)
