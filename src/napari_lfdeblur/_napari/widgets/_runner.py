@@ -48,7 +48,10 @@ class ProgressPanel(Container):
         self.bar = ProgressBar(name="bar", min=0, max=1000, value=0)
         self.status = Label(name="status", value="idle")
         super().__init__(name=name, widgets=[self.bar, self.status], labels=False)
+        from qtpy.QtWidgets import QSizePolicy
+
         self.status.native.setWordWrap(True)
+        self.status.native.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Preferred)
         self.status.native.setMinimumHeight(2 * self.status.native.fontMetrics().lineSpacing() + 4)
         self.margins = (0, 0, 0, 0)
         self._t0 = None
