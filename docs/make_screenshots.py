@@ -78,10 +78,10 @@ def simulate_and_deconvolve(quick: bool):
     viewer = _viewer()
     add_layer(viewer, lightfield_layer_data(lf, name="scene", metadata=lightfield_metadata(kind="input")))
     sim = SimulateBlurWidget(viewer)
-    viewer.window.add_dock_widget(sim, name="Simulate blur", area="right")
+    dock = viewer.window.add_dock_widget(sim, name="Simulate blur", area="right")
     sim.layer_combo.set_layer("scene")
-    sim.preset_combo.setCurrentText("arc")
-    sim.extent_spin.setValue(3.0)
+    sim.path_form.preset.value = "arc"
+    sim.path_form.extent.value = 3.0
     sim.apply_preset()
     blurred, path = sim.run_and_wait(timeout=300)
     sim.epi.layer_combo.set_layer(blurred)
@@ -90,12 +90,12 @@ def simulate_and_deconvolve(quick: bool):
     _show_only(viewer, {blurred.name, path.name, *sim.epi.layer_names()})
     viewer.reset_view()
     _save(viewer, "widget_simulate.png")
-    viewer.window.remove_dock_widget(sim)
+    viewer.window.remove_dock_widget(dock)
 
     dec = DeconvolveWidget(viewer)
     viewer.window.add_dock_widget(dec, name="4D deconvolution", area="right")
     dec.layer_combo.set_layer(blurred)  # the path comes from its metadata
-    dec.method_combo.setCurrentText("auto")  # the arc is in-plane: the exact in-plane solve
+    dec.form.method.value = "auto"  # the arc is in-plane: the exact in-plane solve
     (result,) = dec.run_and_wait(timeout=600)
     dec.epi.layer_combo.set_layer(result)
     dec.epi.set_pick(v=shape[0] // 2, y=shape[2] // 2 + 6, u=shape[1] // 2, x=shape[3] // 2 - 4)
@@ -125,7 +125,7 @@ def blind(quick: bool):
     viewer.window.add_dock_widget(w, name="Blind deblur", area="right")
     w.layer_combo.set_layer("Lytro blurred")
     if quick:
-        w.iter_spin.setValue(max(2, w.iter_spin.value() // 4))
+        w.form.n_iter.value = max(2, w.form.n_iter.value // 4)
     layers = w.run_and_wait(timeout=900)
     if not layers:
         print("blind run failed or timed out", file=sys.stderr)

@@ -16,8 +16,7 @@ from napari_lfdeblur.blur import simulate_blur  # noqa: E402
 from napari_lfdeblur.path import bezier_positions  # noqa: E402
 
 SHAPE = (5, 5, 16, 16)
-TIMEOUT = 120_000  # ms: a guard against hangs (the blind run here took 49 s on a slow 2-core machine before its
-# redraws were spaced by their cost, 5 s after)
+TIMEOUT = 120_000  # ms: a guard against hangs
 
 
 @pytest.fixture
@@ -29,12 +28,12 @@ def lf():
 @pytest.fixture
 def notifications(monkeypatch):
     """Messages shown through the widgets' notification helpers."""
-    from napari_lfdeblur._napari.widgets import _common
+    from napari_lfdeblur._napari.widgets import _controls
 
     seen = []
-    monkeypatch.setattr(_common, "show_error", lambda msg: seen.append(("error", msg)))
-    monkeypatch.setattr(_common, "show_info", lambda msg: seen.append(("info", msg)))
-    monkeypatch.setattr(_common, "show_warning", lambda msg: seen.append(("warning", msg)))
+    monkeypatch.setattr(_controls, "show_error", lambda msg: seen.append(("error", msg)))
+    monkeypatch.setattr(_controls, "show_info", lambda msg: seen.append(("info", msg)))
+    monkeypatch.setattr(_controls, "show_warning", lambda msg: seen.append(("warning", msg)))
     return seen
 
 
@@ -62,9 +61,9 @@ def test_widgets_open_from_the_plugin_menu(make_napari_viewer, display_name, cls
     # napari hands plugins a public-only proxy of the viewer: the widget must work through it
     viewer.add_image(np.zeros((3, 3, 8, 8), np.float32), name="lf")
     combo = widget.epi.layer_combo if cls_name == "EpiWidget" else widget.layer_combo
-    assert combo.current_layer() is not None and combo.currentText() == "lf"
+    assert combo.value is not None and combo.current_choice == "lf"
     if cls_name == "SimulateBlurWidget":
-        widget.n_times_spin.setValue(4)
+        widget.form.n_times.value = 4
         assert [layer.name for layer in widget.run_and_wait(timeout=30)] == ["lf blurred", "lf blurred path"]
 
 
@@ -78,12 +77,12 @@ def test_simulate_adds_blurred_and_path_layers(make_napari_viewer, qtbot, lf, no
     src = viewer.add_image(lf.copy(), name="sharp")
     w = _dock(viewer, SimulateBlurWidget(viewer))
     w.layer_combo.set_layer(src)
-    w.preset_combo.setCurrentText("arc")
-    w.extent_spin.setValue(1.5)
-    w.apply_preset()
-    w.table.table.item(0, 2).setText("0.25")  # typed-in edit: p_z of the first point
-    w.n_times_spin.setValue(8)
-    w.d_inf_spin.setValue(0.5)
+    w.path_form.preset.value = "arc"
+    w.path_form.extent.value = 1.5
+    w.path_form.apply_preset.clicked.emit()
+    w.table.table.native.item(0, 2).setText("0.25")  # typed-in edit: p_z of the first point
+    w.form.n_times.value = 8
+    w.form.infinity_disparity.value = 0.5
     cp = w.table.control_points()
     assert cp[0, 2] == 0.25
     assert w.run() is not None
@@ -118,10 +117,10 @@ def test_simulate_random_path_is_seeded(make_napari_viewer, lf):
 
     viewer = make_napari_viewer()
     w = _dock(viewer, SimulateBlurWidget(viewer))
-    w.n_points_spin.setValue(5)
-    w.seed_spin.setValue(7)
-    w.extent_spin.setValue(3.0)
-    w.apply_random()
+    w.path_form.n_points.value = 5
+    w.path_form.seed.value = 7
+    w.path_form.extent.value = 3.0
+    w.path_form.random.clicked.emit()
     np.testing.assert_allclose(w.table.control_points(), random_path(5, 3.0, seed=7), atol=1e-5)
 
 
@@ -132,7 +131,7 @@ def test_simulate_colour_layer(make_napari_viewer, qtbot):
     viewer = make_napari_viewer()
     viewer.add_image(rgb, name="rgb", rgb=True)
     w = _dock(viewer, SimulateBlurWidget(viewer))
-    w.n_times_spin.setValue(4)
+    w.form.n_times.value = 4
     w.run()
     _wait_done(qtbot, w)
     out = viewer.layers["rgb blurred"]
@@ -191,7 +190,7 @@ def test_bad_table_entry_notifies(make_napari_viewer, lf, notifications):
     viewer = make_napari_viewer()
     viewer.add_image(lf, name="sharp")
     w = _dock(viewer, SimulateBlurWidget(viewer))
-    w.table.table.item(1, 0).setText("abc")
+    w.table.table.native.item(1, 0).setText("abc")
     assert w.run() is None
     assert notifications and "not a number" in notifications[-1][1]
     assert len(viewer.layers) == 1
@@ -215,9 +214,9 @@ def test_deconvolve_takes_path_from_metadata(make_napari_viewer, qtbot, lf, noti
     w.layer_combo.set_layer(layer)
     # the path, T and d_inf came from the layer's metadata
     np.testing.assert_allclose(w.table.control_points(), cp)
-    assert w.n_times_spin.value() == 8
-    w.method_combo.setCurrentText("inplane")
-    w.weight_spin.setValue(0.0)
+    assert w.form.n_times.value == 8
+    w.form.method.value = "inplane"
+    w.form.weight.value = 0.0
     w.run()
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
@@ -244,17 +243,17 @@ def test_deconvolve_tv_with_path_from_path_layer(make_napari_viewer, qtbot, lf, 
     add_layer(viewer, path_layer_data(cp, SHAPE, n_times=6, name="some path"))
     w = _dock(viewer, DeconvolveWidget(viewer))
     w.layer_combo.set_layer("b")
-    w.path_layer_combo.set_layer("some path")
-    w.take_path()
+    w.path_source.path_layer.set_layer("some path")
+    w.path_source.take_button.clicked.emit()
     np.testing.assert_allclose(w.table.control_points(), cp)
-    assert w.n_times_spin.value() == 6
-    w.method_combo.setCurrentText("tv")
-    w.iter_spin.setValue(5)
+    assert w.form.n_times.value == 6
+    w.form.method.value = "tv"
+    w.form.n_iter.value = 5
     w.run()
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
     out = viewer.layers["b deconvolved"].data
-    ref = deconvolve(blurred, cp, n_times=6, method="tv", weight=w.weight_spin.value(), n_iter=5)
+    ref = deconvolve(blurred, cp, n_times=6, method="tv", weight=w.form.weight.value, n_iter=5)
     np.testing.assert_allclose(out, ref, atol=1e-5)
 
 
@@ -265,7 +264,7 @@ def test_deconvolve_solver_error_is_a_notification(make_napari_viewer, qtbot, lf
     viewer.add_image(lf, name="b")
     w = _dock(viewer, DeconvolveWidget(viewer))
     w.table.set_control_points([[0, 0, 0.5], [1, 0, 0]])  # not in-plane
-    w.method_combo.setCurrentText("inplane")
+    w.form.method.value = "inplane"
     w.run()
     _wait_done(qtbot, w)
     assert [n for n in notifications if n[0] == "error"]
@@ -276,7 +275,7 @@ def test_deconvolve_solver_error_is_a_notification(make_napari_viewer, qtbot, lf
 
 
 def test_epi_layers_follow_the_pick(make_napari_viewer, lf):
-    from napari_lfdeblur._napari.widgets._common import EpiPanel
+    from napari_lfdeblur._napari.widgets.epi import EpiPanel
 
     viewer = make_napari_viewer()
     viewer.add_image(lf, name="lf")
@@ -286,10 +285,10 @@ def test_epi_layers_follow_the_pick(make_napari_viewer, lf):
     h, v = panel.show_epis()
     np.testing.assert_array_equal(h.data, lf[2, :, 8, :])
     np.testing.assert_array_equal(v.data, lf[:, 2, :, 8].T)
-    panel.y_spin.setValue(3)
-    panel.v_spin.setValue(1)
+    panel.y.value = 3
+    panel.v.value = 1
     np.testing.assert_array_equal(viewer.layers["lf EPI h"].data, lf[1, :, 3, :])
-    panel.x_spin.setValue(11)
+    panel.x.value = 11
     np.testing.assert_array_equal(viewer.layers["lf EPI v"].data, lf[:, 2, :, 11].T)
     assert viewer.layers["lf EPI h"].metadata["y"] == 3
     assert len(viewer.layers) == 3  # updated in place, not added again
@@ -298,22 +297,22 @@ def test_epi_layers_follow_the_pick(make_napari_viewer, lf):
 def test_epi_pick_by_clicking(make_napari_viewer, lf):
     from types import SimpleNamespace
 
-    from napari_lfdeblur._napari.widgets._common import EpiWidget
+    from napari_lfdeblur._napari.widgets import EpiWidget
 
     viewer = make_napari_viewer()
     viewer.add_image(lf, name="lf")
     w = EpiWidget(viewer)
     viewer.window.add_dock_widget(w)
     w.epi.layer_combo.set_layer("lf")
-    w.epi.click_box.setChecked(True)
+    w.epi.click_box.value = True
     callback = viewer.mouse_drag_callbacks[-1]
     callback(viewer, SimpleNamespace(position=(1.0, 3.0, 5.2, 9.7)))  # (v, u, y, x) world coordinates
-    assert (w.epi.v_spin.value(), w.epi.u_spin.value(), w.epi.y_spin.value(), w.epi.x_spin.value()) == (1, 3, 5, 10)
+    assert (w.epi.v.value, w.epi.u.value, w.epi.y.value, w.epi.x.value) == (1, 3, 5, 10)
     np.testing.assert_array_equal(viewer.layers["lf EPI h"].data, lf[1, :, 5, :])
     np.testing.assert_array_equal(viewer.layers["lf EPI v"].data, lf[:, 3, :, 10].T)
     callback(viewer, SimpleNamespace(position=(1.0, 3.0, 40.0, 9.0)))  # outside the image: ignored
-    assert w.epi.y_spin.value() == 5
-    w.epi.click_box.setChecked(False)
+    assert w.epi.y.value == 5
+    w.epi.click_box.value = False
     assert callback not in viewer.mouse_drag_callbacks
 
 
@@ -339,13 +338,13 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     before = layer.data.copy()
     w = _dock(viewer, BlindDeblurWidget(viewer))
     w.layer_combo.set_layer(layer)
-    assert w.true_combo.currentText() == "b"  # the true path comes from the metadata
-    w.points_spin.setValue(3)
-    w.iter_spin.setValue(2)
-    w.tv_iter_spin.setValue(3)
-    w.device_combo.setCurrentText("cpu")
-    w.preview_spin.setValue(1)
-    w.anisotropy_spin.setValue(0.3)
+    assert w.form.true_path.current_choice == "b"  # the true path comes from the metadata
+    w.form.n_control_points.value = 3
+    w.form.n_iter.value = 2
+    w.form.tv_iter.value = 3
+    w.form.device.value = "cpu"
+    w.form.preview_every.value = 1
+    w.form.edge_anisotropy.value = 0.3
     w.run()
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
@@ -358,7 +357,7 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     cp = np.asarray(meta["control_points"])
     assert cp.shape == (3, 3)
     np.testing.assert_allclose(cp, res.control_points)
-    # zero-mean gauge (MODEL.md)
+    # zero-mean gauge (docs/model.md)
     np.testing.assert_allclose(bezier_positions(cp, meta["n_times"]).mean(axis=0), 0.0, atol=1e-5)
     assert meta["napari_lfdeblur_version"] == napari_lfdeblur.__version__
     assert meta["parameters"]["device"] == "cpu" and meta["parameters"]["seed"] == 0
@@ -372,8 +371,8 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     np.testing.assert_allclose(w.loss_plot.values, meta["loss_history"])
     assert len(meta["loss_history"]) >= 2
     assert w.preview_updates >= 1 and w.path_preview_updates >= 1  # live previews were shown (then removed)
-    assert meta["parameters"]["n_control_points"] == 3 and meta["parameters"]["tv_iter"] == 3
-    assert meta["parameters"]["edge_anisotropy"] == pytest.approx(0.3)
+    assert meta["parameters"]["n_control_points"] == 3 and meta["parameters"]["final"]["n_iter"] == 3
+    assert meta["parameters"]["latent"]["edge_anisotropy"] == pytest.approx(0.3)
     np.testing.assert_array_equal(layer.data, before)
 
 
@@ -385,8 +384,8 @@ def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, not
     layer, _ = _blind_layer(viewer, lf)
     w = _dock(viewer, BlindDeblurWidget(viewer))
     w.layer_combo.set_layer(layer)
-    w.iter_spin.setValue(100000)
-    w.device_combo.setCurrentText("cpu")
+    w.form.n_iter.value = 100000
+    w.form.device.value = "cpu"
     w.run()
     # wait for the live path preview (a layer)
     qtbot.waitUntil(lambda: "b path (preview)" in viewer.layers, timeout=TIMEOUT)
@@ -415,7 +414,8 @@ def test_blind_live_redraws_are_spaced_by_their_cost(make_napari_viewer, monkeyp
         drawn.append(kwargs.get("live"))
         time.sleep(0.1)
 
-    monkeypatch.setattr(w.plot, "plot", slow_plot)
+    # patched on the class: magicgui containers treat attribute deletion (monkeypatch's undo) as widget removal
+    monkeypatch.setattr(type(w.plot), "plot", slow_plot)
     record = Progress(stage="path", iteration=1, n_iterations=10, loss=1.0, control_points=np.zeros((2, 3)))
     w.on_progress(record)
     assert drawn == [True] and "b path (preview)" in viewer.layers
@@ -439,7 +439,7 @@ def test_blind_unavailable_device_notifies(make_napari_viewer, lf, notifications
     viewer = make_napari_viewer()
     _blind_layer(viewer, lf)
     w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.device_combo.setCurrentText("cuda")
+    w.form.device.value = "cuda"
     assert w.run() is None
     assert notifications[-1][0] == "error" and "cuda" in notifications[-1][1]
     assert [layer.name for layer in viewer.layers] == ["b"]
@@ -456,8 +456,8 @@ def test_blurred_sample_feeds_the_deconvolution_widget(make_napari_viewer, qtbot
     w = _dock(viewer, DeconvolveWidget(viewer))
     w.layer_combo.set_layer(layer)
     np.testing.assert_allclose(w.table.control_points(), BLURRED_SAMPLE_PATH, atol=1e-5)
-    w.method_combo.setCurrentText("inplane")
-    w.weight_spin.setValue(0.0)
+    w.form.method.value = "inplane"
+    w.form.weight.value = 0.0
     w.run()
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
@@ -466,3 +466,67 @@ def test_blurred_sample_feeds_the_deconvolution_widget(make_napari_viewer, qtbot
     assert out.shape == sharp.shape
     # the exact in-plane inverse of the known path (up to the table's 6 digits) gives back the scene
     assert np.abs(out - sharp).max() < 1e-3
+
+
+# ------------------------------------------------------------- magicgui
+
+
+def test_magicgui_form_runs_the_solver(make_napari_viewer, qtbot, lf, notifications):
+    """Fill the deconvolution widget's magicgui form through magicgui and run the core through it."""
+    from magicgui.widgets import Container
+
+    from napari_lfdeblur._napari.widgets import DeconvolveWidget
+    from napari_lfdeblur.deconvolution import deconvolve
+
+    cp = np.array([[-0.4, 0.3, 0.05], [0.5, -0.2, -0.05]])
+    blurred = simulate_blur(lf, cp, n_times=6, infinity_disparity=0.25)
+    viewer = make_napari_viewer()
+    viewer.add_image(blurred, name="b")
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    assert isinstance(w, Container) and isinstance(w.form, Container)
+    form = w.form
+    form.layer.value = viewer.layers["b"]
+    form.n_times.value = 6
+    form.infinity_disparity.value = 0.25
+    form.method.value = "tv"
+    form.weight.value = 0.004
+    form.n_iter.value = 3
+    form.device.value = "cpu"
+    w.table.set_control_points(cp)
+    w.run_button.clicked.emit()  # as if Run were pressed
+    _wait_done(qtbot, w)
+    assert not [n for n in notifications if n[0] == "error"], notifications
+    out = viewer.layers["b deconvolved"]
+    expected = deconvolve(blurred, cp, n_times=6, infinity_disparity=0.25, method="tv", weight=0.004, n_iter=3,
+                          device="cpu")
+    assert np.allclose(out.data, expected)
+    params = out.metadata["parameters"]
+    assert {k: params[k] for k in ("n_times", "infinity_disparity", "method", "weight", "n_iter", "device")} == {
+        "n_times": 6, "infinity_disparity": 0.25, "method": "tv", "weight": 0.004, "n_iter": 3, "device": "cpu"}
+    np.testing.assert_allclose(out.metadata["control_points"], cp)
+    np.testing.assert_array_equal(viewer.layers["b"].data, blurred)
+
+
+def test_path_json_file_fills_the_table(make_napari_viewer, tmp_path):
+    from napari_lfdeblur._napari.widgets import DeconvolveWidget
+    from napari_lfdeblur.path import arc_path, save_path_json
+
+    cp = arc_path(length=2.0, bend=0.3)
+    save_path_json(tmp_path / "p.json", cp)
+    viewer = make_napari_viewer()
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    w.path_source.json_file.value = tmp_path / "p.json"
+    np.testing.assert_allclose(w.table.control_points(), cp, atol=1e-5)
+
+
+def test_path_table_rows_can_be_added_and_removed(make_napari_viewer):
+    from napari_lfdeblur._napari.widgets import SimulateBlurWidget
+
+    viewer = make_napari_viewer()
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.table.set_control_points([[0, 0, 0], [1, 2, 0]])
+    w.table.add_button.clicked.emit()
+    np.testing.assert_allclose(w.table.control_points(), [[0, 0, 0], [1, 2, 0], [1, 2, 0]])
+    w.table.remove_button.clicked.emit()
+    w.table.remove_button.clicked.emit()  # two points at least
+    np.testing.assert_allclose(w.table.control_points(), [[0, 0, 0], [1, 2, 0]])

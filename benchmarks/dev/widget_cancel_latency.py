@@ -36,7 +36,7 @@ def main(argv=None):
     add_layer(viewer, lightfield_layer_data(blurred, name="blurred"))
     widget = BlindDeblurWidget(viewer)
     viewer.window.add_dock_widget(widget)
-    widget.device_combo.setCurrentText(args.device)
+    widget.form.device.value = args.device
     print(f"light field {blurred.shape}, device {args.device}")
     for wait in args.waits:
         if widget.run() is None:
@@ -48,7 +48,7 @@ def main(argv=None):
         if not widget.is_running:
             print(f"wait {wait:5.1f} s: the run finished before Cancel")
             continue
-        stage = widget.progress.label.text().split(":")[0]
+        stage = widget.progress.status.value.split(":")[0]
         widget.cancel()
         t1 = time.perf_counter()
         while widget.is_running:

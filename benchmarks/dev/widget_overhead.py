@@ -37,8 +37,8 @@ def main(argv=None):
     blurred = simulate_blur(lf, arc_path(2.5, 0.3, 20.0))
     params = BlindParams.preset("default").replace(final={"n_iter": args.tv_iter})
     t0 = time.perf_counter()
-    n_records = sum(1 for _ in with_previews(iter_blind_deblur(blurred, params=params, device=args.device),
-                                            args.preview_every))
+    gen = with_previews(iter_blind_deblur(blurred, params=params, device=args.device), args.preview_every)
+    n_records = sum(1 for _ in gen)
     bare = time.perf_counter() - t0
     print(f"light field {blurred.shape}, device {args.device}")
     print(f"script (iterating the generator): {bare:.1f} s, {n_records} progress records")
@@ -47,9 +47,9 @@ def main(argv=None):
     add_layer(viewer, lightfield_layer_data(blurred, name="blurred"))
     widget = BlindDeblurWidget(viewer)
     viewer.window.add_dock_widget(widget)
-    widget.device_combo.setCurrentText(args.device)
-    widget.tv_iter_spin.setValue(args.tv_iter)
-    widget.preview_spin.setValue(args.preview_every)
+    widget.form.device.value = args.device
+    widget.form.tv_iter.value = args.tv_iter
+    widget.form.preview_every.value = args.preview_every
     shown = {"calls": 0, "seconds": 0.0}
     on_progress = widget.on_progress
 

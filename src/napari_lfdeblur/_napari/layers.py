@@ -101,7 +101,7 @@ def layer_kind(layer) -> str | None:
 def lightfield_from_layer(layer) -> np.ndarray:
     """A float32 copy of a layer's light field, ``(V, U, Y, X[, C])`` in [0, 1].
 
-    Integer data are divided by their dtype's maximum (MODEL.md). The layer
+    Integer data are divided by their dtype's maximum (docs/model.md). The layer
     is never modified: the result is always a new array.
 
     Parameters

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import write_lightfield
-from ..io._write import _jsonable
+from ..io._write import sidecar_path_json
 
 __all__ = ["write_npz", "write_tiff", "write_h5", "write_layer"]
 
@@ -47,12 +47,10 @@ def write_layer(path: str, data, attributes: dict, suffix: str) -> list[str]:
         )
     meta = dict(attributes.get("metadata") or {})
     cp = meta.pop("control_points", None)
-    meta = _jsonable({"layer_name": attributes.get("name"), **meta})
+    meta = {"layer_name": attributes.get("name"), **meta}  # made JSON-friendly by write_lightfield
     written = write_lightfield(p, arr, metadata=meta, control_points=cp)
     out = [str(written)]
     if cp is not None:
-        from ..io._write import sidecar_path_json
-
         out.append(str(sidecar_path_json(Path(written), "npz")))
     return out
 

@@ -24,7 +24,7 @@ def __getattr__(name):
 
         return BlindDeblurWidget
     if name == "EpiWidget":
-        from ._common import EpiWidget
+        from .epi import EpiWidget
 
         return EpiWidget
     raise AttributeError(name)

@@ -1,26 +1,26 @@
 """The *Blind deblur* dock widget: estimate the camera path and the sharp light field.
 
 A thin shell over :func:`napari_lfdeblur.blind.iter_blind_deblur`, run in a
-napari ``thread_worker``. While it runs:
+napari ``thread_worker``. Its magicgui form (``form``) holds the input
+``layer``, the solver ``preset`` (choosing one shows its values in the
+fields below), ``n_control_points``, ``n_iter`` (path iterations),
+``tv_iter`` (final TV iterations), ``device``, ``seed``,
+``infinity_disparity``, ``edge_anisotropy``, ``preview_every`` and an
+optional ``true_path`` layer. While it runs:
 
-- a progress bar with the time left (extrapolated from the fraction done);
+- a progress bar with the stage, iteration, loss and time left;
 - a live preview: the layer ``'<source> path (preview)'`` and the path plot
-  show the current path (with the true path, dashed / cyan, when the input
-  layer's metadata holds one, e.g. after *Simulate blur*), redrawn at most
-  every 0.3 s, and after a pause of five times what the last redraw took (the
-  redraws run in Qt's thread and hold Python's lock, so that on a slow machine
-  they would otherwise slow the solver down: ``benchmarks/widget_overhead.py``);
-  the layer ``'<source> blind (preview)'`` shows the current light-field
-  estimate whenever the solver sends one (every *preview every* reports: the
-  salient-edge latent during path estimation, then the estimate of the final
-  non-blind stage);
+  show the current path (with the true path, dashed / cyan, when known),
+  redrawn at most every :data:`REDRAW_INTERVAL` seconds and after a pause of
+  :data:`REDRAW_SHARE` times what the last redraw took (the redraws run in
+  Qt's thread and hold Python's lock, so they would otherwise slow the solver
+  down on a machine with few cores); the layer ``'<source> blind (preview)'``
+  shows the current light-field estimate every *preview every* progress
+  records (computed in the worker thread);
 - the loss curve.
 
-Cancel stops the solver at its next progress report, which comes after
-every conjugate-gradient step of the latent solve, every 10 path-fit steps
-and every TV iteration (at most 3 blur evaluations apart; on a 9x9x128x128
-light field on a loaded 2-core CPU, 0.5 s apart typically, 1.9 s at most), removes
-the preview layers and adds nothing. When it finishes, the preview is replaced by
+Cancel stops the solver at its next progress report, removes the preview
+layers and adds nothing. When it finishes, the previews are replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
 timings, package version) and ``'<source> estimated path'``.
 """
@@ -30,7 +30,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from qtpy.QtWidgets import QComboBox, QGroupBox, QLabel, QVBoxLayout
+from magicgui.widgets import ComboBox, Label
 
 from ...path import validate_control_points
 from ..layers import (
@@ -42,49 +42,71 @@ from ..layers import (
     path_layer_data,
     remove_layer,
 )
-from ._common import (
-    EpiPanel,
-    LayerComboBox,
-    LossPlot,
-    PathPlot,
-    SolverWidget,
-    device_combo,
-    dspin,
-    has_path,
-    spin,
-)
+from ._controls import LayerChoice, device_choice, fspin, has_path, heading, spin
+from ._plots import LossPlot, PathPlot
+from ._runner import SolverWidget
+from .epi import EpiPanel
 
-__all__ = ["BlindDeblurWidget"]
+__all__ = ["BlindDeblurWidget", "REDRAW_INTERVAL", "REDRAW_SHARE"]
 
 #: least seconds between two redraws of the plots and the path preview during a run
 REDRAW_INTERVAL = 0.3
-#: a redraw that took ``c`` seconds is followed by at least ``REDRAW_SHARE * c`` seconds without
-#: one, so that redraws (Qt's thread, holding Python's lock) leave the solver most of the time
-#: on a slow machine
+#: a redraw that took ``c`` seconds is followed by at least ``REDRAW_SHARE * c`` seconds without one
 REDRAW_SHARE = 5.0
 
 
-def _presets() -> list[str]:
-    from ...blind import PRESETS
-
-    return list(PRESETS)
-
-
-def _iteration_field(params) -> str:
-    """The BlindParams field the *iterations* box sets: Adam steps ('joint') or alternations per level."""
-    return "n_iter" if params.method == "joint" else "n_outer"
+def _iteration_field(params) -> tuple[str, str]:
+    """The stage and field the *path iterations* field sets: Adam steps ('joint') or alternations per level."""
+    return ("joint", "n_iter") if params.method == "joint" else ("path", "n_outer")
 
 
-def _make_params(preset: str, *, n_points: int, n_iter: int, tv_iter: int, preview_every: int,
-                 edge_anisotropy: float = 0.0):
-    """``BlindParams`` of a preset with the widget's values."""
+def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: int, edge_anisotropy: float):
+    """``BlindParams`` of a preset with the form's values (``tv_iter`` 0: no final solve)."""
     from ...blind import BlindParams
 
     params = BlindParams.preset(preset)
+    stage, field = _iteration_field(params)
     return params.replace(
-        n_control_points=n_points, tv_iter=tv_iter, preview_every=preview_every,
-        edge_anisotropy=edge_anisotropy, **{_iteration_field(params): n_iter},
+        n_control_points=n_control_points, final=None if tv_iter == 0 else {"n_iter": tv_iter}, latent={"edge_anisotropy": edge_anisotropy},
+        **{stage: {field: n_iter}},
     )
+
+
+def _preset_values(preset: str) -> dict:
+    """The form's fields as a preset sets them."""
+    from ...blind import BlindParams
+
+    p = BlindParams.preset(preset)
+    stage, field = _iteration_field(p)
+    return {"n_control_points": p.n_control_points, "n_iter": getattr(getattr(p, stage), field),
+            "tv_iter": 0 if p.final is None else p.final.n_iter, "edge_anisotropy": p.latent.edge_anisotropy}
+
+
+def _fields(viewer) -> list:
+    """The solver fields of the form (the input layer aside)."""
+    from ...blind import PRESETS
+
+    return [
+        ComboBox(name="preset", choices=list(PRESETS), value="default",
+                 tooltip="solver parameter preset (BlindParams.preset)"),
+        spin("n_control_points", 4, 2, 12, label="control points",
+             tooltip="control points of the estimated Bezier path"),
+        spin("n_iter", 8, 1, 100000, label="path iterations", tooltip="path iterations: alternations "
+             "per pyramid level ('default' preset) or joint Adam steps ('paper' preset)"),
+        spin("tv_iter", 100, 0, 100000, label="final TV iterations", tooltip="iterations of the final "
+             "non-blind TV solve (0: return the blurred input with the path)"),
+        device_choice(),
+        spin("seed", 0, 0, 2**31 - 1, tooltip="random seed of the initial path"),
+        fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
+              tooltip="infinity disparity d_inf, px/view"),
+        fspin("edge_anisotropy", 0.0, -2.0, 2.0, 0.05, label="views softer along x (px)",
+              tooltip="how much softer the camera's views are along x than along y, px "
+              "(0: the same; see docs/blind.md)"),
+        spin("preview_every", 10, 0, 1000, label="preview every", tooltip="preview the light field every "
+             "N progress records (0: none); the path is previewed at every record"),
+        LayerChoice(viewer, predicate=has_path, nullable=True, name="true_path", label="true path (optional)",
+                    tooltip="a layer holding the true path, to plot for comparison"),
+    ]
 
 
 class BlindDeblurWidget(SolverWidget):
@@ -92,50 +114,16 @@ class BlindDeblurWidget(SolverWidget):
 
     title = "Blind deblur"
 
-    def __init__(self, napari_viewer, parent=None):
-        super().__init__(napari_viewer, parent)
-        self.preset_combo = QComboBox()
-        self.preset_combo.addItems(_presets())
-        self.preset_combo.setToolTip("solver parameter preset (BlindParams.preset)")
-        self.points_spin = spin(4, 2, 12, "control points of the estimated Bezier path")
-        self.iter_spin = spin(8, 1, 100000, "path iterations: alternations per pyramid level "
-                              "('default' preset) or joint Adam steps ('paper' preset)")
-        self.tv_iter_spin = spin(100, 0, 100000, "iterations of the final non-blind TV solve "
-                                 "(0: return the blurred input with the path)")
-        self.device_combo = device_combo()
-        self.seed_spin = spin(0, 0, 2**31 - 1, "random seed of the initial path")
-        self.d_inf_spin = dspin(0.0, -20.0, 20.0, 0.1, 3, "infinity disparity d_inf, px/view")
-        self.anisotropy_spin = dspin(0.0, -2.0, 2.0, 0.05, 2, "how much softer the camera's views are "
-                                     "along x than along y, px (BlindParams.edge_anisotropy; views "
-                                     "decoded from a first-generation Lytro: about 0.6; 0: the same)")
-        self.preview_spin = spin(10, 0, 1000, "preview the light field every N iterations of the "
-                                 "final solve (0: none); the path is previewed at every iteration")
-        self.true_combo = LayerComboBox(napari_viewer, predicate=has_path, allow_none=True)
-        self.true_combo.setToolTip("a layer holding the true path, to plot for comparison (optional)")
-        self.form.addRow("preset", self.preset_combo)
-        self.form.addRow("control points", self.points_spin)
-        self.form.addRow("path iterations", self.iter_spin)
-        self.form.addRow("final TV iterations", self.tv_iter_spin)
-        self.form.addRow("device", self.device_combo)
-        self.form.addRow("seed", self.seed_spin)
-        self.form.addRow("infinity disparity", self.d_inf_spin)
-        self.form.addRow("views softer along x (px)", self.anisotropy_spin)
-        self.form.addRow("preview every", self.preview_spin)
-        self.form.addRow("true path (optional)", self.true_combo)
-
-        plots = QGroupBox("Path and loss")
-        g = QVBoxLayout(plots)
+    def __init__(self, napari_viewer):
+        super().__init__(napari_viewer)
+        self.form.extend(_fields(napari_viewer))
         self.plot = PathPlot()
         self.loss_plot = LossPlot()
-        g.addWidget(QLabel("camera path (solid: estimate, dashed: true)"))
-        g.addWidget(self.plot)
-        g.addWidget(self.loss_plot)
-        self.after_layout.addWidget(plots)
         self.epi = EpiPanel(napari_viewer)
-        self.after_layout.addWidget(self.epi)
-
-        self.layer_combo.currentTextChanged.connect(self._input_changed)
-        self.preset_combo.currentTextChanged.connect(self._preset_changed)
+        caption = Label(value="camera path (solid: estimate, dashed: true)")
+        self.assemble(after=[heading("Path and loss"), caption, self.plot, self.loss_plot, self.epi])
+        self.layer_combo.changed.connect(self._input_changed)
+        self.form.preset.changed.connect(self._preset_changed)
         self._preset_changed()
         self._input_changed()
         self._next_draw = 0.0
@@ -143,37 +131,32 @@ class BlindDeblurWidget(SolverWidget):
         self.path_preview_updates = 0
 
     def _preset_changed(self, *_):
-        """Show the preset's values in the boxes."""
-        from ...blind import BlindParams
-
+        """Show the preset's values in the fields."""
         try:
-            p = BlindParams.preset(self.preset_combo.currentText())
+            values = _preset_values(self.form.preset.value)
         except ValueError:
             return
-        self.points_spin.setValue(p.n_control_points)
-        self.iter_spin.setValue(getattr(p, _iteration_field(p)))
-        self.tv_iter_spin.setValue(p.tv_iter)
-        self.preview_spin.setValue(p.preview_every)
-        self.anisotropy_spin.setValue(p.edge_anisotropy)
+        for key, value in values.items():
+            self.form[key].value = value
 
     def _input_changed(self, *_):
-        layer = self.layer_combo.current_layer()
+        layer = self.layer_combo.value
         if layer is not None and has_path(layer):
-            self.true_combo.set_layer(layer)
+            self.form.true_path.set_layer(layer)
             if "infinity_disparity" in layer.metadata:
-                self.d_inf_spin.setValue(float(layer.metadata["infinity_disparity"]))
+                self.form.infinity_disparity.value = float(layer.metadata["infinity_disparity"])
 
     def true_path(self):
         """The chosen true path, or None.
 
         It is moved to the zero-mean gauge and the canonical time direction of
         the blind estimates, so that the two can be compared by eye (the blur
-        does not depend on either, MODEL.md "Ambiguities").
+        depends on neither; docs/model.md).
         """
-        from ...blind import canonical_time_direction
+        from ...path import canonical_time_direction
         from ...path import center_path
 
-        layer = self.true_combo.current_layer()
+        layer = self.form.true_path.value
         if layer is None:
             return None
         try:
@@ -191,30 +174,22 @@ class BlindDeblurWidget(SolverWidget):
         """Name of the path preview layer of the current run."""
         return f"{self._job['source']} path (preview)" if getattr(self, "_job", None) else ""
 
+    def preview_every(self) -> int:
+        return int(self.form.preview_every.value)
+
     # ------------------------------------------------------------- job
     def make_job(self, layer, lf):
         from ...blind import iter_blind_deblur
 
-        params = _make_params(
-            self.preset_combo.currentText(),
-            n_points=self.points_spin.value(),
-            n_iter=self.iter_spin.value(),
-            tv_iter=self.tv_iter_spin.value(),
-            preview_every=self.preview_spin.value(),
-            edge_anisotropy=self.anisotropy_spin.value(),
-        )
-        device = self.device_combo.currentText()
-        d_inf = self.d_inf_spin.value()
-        seed = self.seed_spin.value()
-        gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=device, seed=seed)
-        self._job = {
-            "source": layer.name,
-            "shape": lf.shape,
-            "true": self.true_path(),
-            "n_times": params.n_times,
-            "settings": {"preset": self.preset_combo.currentText(), "device": device,
-                         "seed": seed, "infinity_disparity": d_inf},
-        }
+        f = self.form
+        params = _make_params(f.preset.value, n_control_points=f.n_control_points.value, n_iter=f.n_iter.value,
+                              tv_iter=f.tv_iter.value, edge_anisotropy=f.edge_anisotropy.value)
+        settings = {"preset": f.preset.value, "device": f.device.value, "seed": f.seed.value,
+                    "infinity_disparity": f.infinity_disparity.value}
+        gen = iter_blind_deblur(lf, infinity_disparity=settings["infinity_disparity"], params=params,
+                                device=settings["device"], seed=settings["seed"])
+        self._job = {"source": layer.name, "shape": lf.shape, "true": self.true_path(),
+                     "n_times": params.n_times, "settings": settings}
         self.loss_plot.reset()
         self.plot.plot(None, self._job["true"])
         self._next_draw = 0.0
@@ -233,16 +208,20 @@ class BlindDeblurWidget(SolverWidget):
             self.preview_updates += 1
         start = time.perf_counter()
         if start >= self._next_draw:
-            self.loss_plot.plot(self.loss_plot.values, live=True)
-            if progress.control_points is not None:
-                self.plot.plot(progress.control_points, self._job["true"], live=True)
-                add_layer(self.viewer, path_layer_data(
-                    progress.control_points, self._job["shape"], n_times=self._job["n_times"],
-                    name=self.path_preview_name(), true_control_points=self._job["true"],
-                    metadata={"kind": "path preview"}))
-                self.path_preview_updates += 1
+            self._redraw_live(progress)
             end = time.perf_counter()
             self._next_draw = end + max(REDRAW_INTERVAL, REDRAW_SHARE * (end - start))
+
+    def _redraw_live(self, progress) -> None:
+        """Redraw the loss curve, the path plot and the path preview layer."""
+        self.loss_plot.plot(self.loss_plot.values, live=True)
+        if progress.control_points is not None:
+            self.plot.plot(progress.control_points, self._job["true"], live=True)
+            add_layer(self.viewer, path_layer_data(
+                progress.control_points, self._job["shape"], n_times=self._job["n_times"],
+                name=self.path_preview_name(), true_control_points=self._job["true"],
+                metadata={"kind": "path preview"}))
+            self.path_preview_updates += 1
 
     def cleanup(self) -> None:
         if getattr(self, "_job", None):

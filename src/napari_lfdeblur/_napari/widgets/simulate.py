@@ -1,8 +1,10 @@
 """The *Simulate blur* dock widget: blur a light-field layer by a camera path.
 
-A thin shell over :func:`napari_lfdeblur.simulate_blur`. The path is edited
-in a table of control points, filled from a preset (linear, arc, shake) or a
-random path with a seed. Running it adds:
+A thin shell over :func:`napari_lfdeblur.simulate_blur`. The form (magicgui,
+``form``) holds the input ``layer``, ``n_times``, ``infinity_disparity`` and
+``device``; the path is edited in a table of control points (``table``),
+filled from a preset (linear, arc, shake) or a random path with a seed
+(``path_form``). Running it adds:
 
 - ``'<source> blurred'``: the blurred light field (metadata: the path in
   ``'control_points'``, ``'n_times'``, ``'infinity_disparity'``, the
@@ -14,22 +16,29 @@ random path with a seed. Running it adds:
 
 from __future__ import annotations
 
-from qtpy.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QPushButton
+from magicgui.widgets import ComboBox, Container, PushButton
 
-from ...progress import Progress
 from ...path import preset_path, random_path
+from ...progress import Progress
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata, path_layer_data
-from ._common import (
-    EpiPanel,
-    PathPlot,
-    PathTable,
-    SolverWidget,
-    device_combo,
-    dspin,
-    spin,
-)
+from ._controls import PathTable, device_choice, fspin, heading, spin
+from ._plots import PathPlot
+from ._runner import SolverWidget
+from .epi import EpiPanel
 
 __all__ = ["SimulateBlurWidget"]
+
+
+def _path_form() -> Container:
+    """Preset and random-path fields of the *Camera path* section."""
+    return Container(name="path_form", widgets=[
+        ComboBox(name="preset", choices=["linear", "arc", "shake"], value="linear"),
+        fspin("extent", 2.0, 0.0, 50.0, 0.25, tooltip="size of the motion, in views"),
+        PushButton(name="apply_preset", text="Apply preset"),
+        spin("n_points", 4, 2, 12, label="points", tooltip="control points of the random path"),
+        spin("seed", 0, 0, 2**31 - 1, tooltip="random seed (random path and shake preset)"),
+        PushButton(name="random", text="Random path"),
+    ])
 
 
 class SimulateBlurWidget(SolverWidget):
@@ -37,86 +46,59 @@ class SimulateBlurWidget(SolverWidget):
 
     title = "Simulate blur"
 
-    def __init__(self, napari_viewer, parent=None):
-        super().__init__(napari_viewer, parent)
-        # path presets
-        self.preset_combo = QComboBox()
-        self.preset_combo.addItems(["linear", "arc", "shake"])
-        self.extent_spin = dspin(2.0, 0.0, 50.0, 0.25, 2, "size of the motion, in views")
-        self.preset_button = QPushButton("Apply preset")
-        self.n_points_spin = spin(4, 2, 12, "control points of the random path")
-        self.seed_spin = spin(0, 0, 2**31 - 1, "random seed (random path and shake preset)")
-        self.random_button = QPushButton("Random path")
+    def __init__(self, napari_viewer):
+        super().__init__(napari_viewer)
+        self.form.extend([
+            spin("n_times", 32, 2, 1024, label="instants T", tooltip="exposure instants T"),
+            fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
+                  tooltip="infinity disparity d_inf, px/view"),
+            device_choice(),
+        ])
+        self.path_form = _path_form()
         self.table = PathTable(preset_path("linear", 2.0))
         self.plot = PathPlot()
-
-        group = QGroupBox("Camera path")
-        g = QFormLayout(group)
-        row = QHBoxLayout()
-        row.addWidget(self.preset_combo)
-        row.addWidget(self.extent_spin)
-        row.addWidget(self.preset_button)
-        g.addRow("preset / extent", row)
-        row = QHBoxLayout()
-        row.addWidget(self.n_points_spin)
-        row.addWidget(self.seed_spin)
-        row.addWidget(self.random_button)
-        g.addRow("points / seed", row)
-        g.addRow(self.table)
-        g.addRow(self.plot)
-        self.extra_layout.addWidget(group)
-
-        self.n_times_spin = spin(32, 2, 1024, "exposure instants T")
-        self.d_inf_spin = dspin(0.0, -20.0, 20.0, 0.1, 3, "infinity disparity d_inf, px/view")
-        self.device_combo = device_combo()
-        self.form.addRow("instants T", self.n_times_spin)
-        self.form.addRow("infinity disparity", self.d_inf_spin)
-        self.form.addRow("device", self.device_combo)
-
         self.epi = EpiPanel(napari_viewer)
-        self.after_layout.addWidget(self.epi)
-
-        self.preset_button.clicked.connect(self.apply_preset)
-        self.random_button.clicked.connect(self.apply_random)
+        self.assemble(before=[heading("Camera path"), self.path_form, self.table, self.plot], after=[self.epi])
+        self.path_form.apply_preset.changed.connect(self.apply_preset)
+        self.path_form.random.changed.connect(self.apply_random)
         self.table.changed.connect(self._replot)
+        self.form.n_times.changed.connect(self._replot)
         self._replot()
 
     # ------------------------------------------------------------ path
     def apply_preset(self, *_):
         """Fill the table with the chosen preset of the chosen extent."""
-        cp = preset_path(self.preset_combo.currentText(), extent=self.extent_spin.value(),
-                         seed=self.seed_spin.value())
-        self.table.set_control_points(cp)
+        f = self.path_form
+        self.table.set_control_points(preset_path(f.preset.value, extent=f.extent.value, seed=f.seed.value))
 
     def apply_random(self, *_):
-        """Fill the table with a random path (points, extent and seed from the spin boxes)."""
-        cp = random_path(n_points=self.n_points_spin.value(), extent=self.extent_spin.value(),
-                         seed=self.seed_spin.value())
-        self.table.set_control_points(cp)
+        """Fill the table with a random path (points, extent and seed from the form)."""
+        f = self.path_form
+        self.table.set_control_points(random_path(n_points=f.n_points.value, extent=f.extent.value,
+                                                  seed=f.seed.value))
 
     def _replot(self, *_):
         try:
             cp = self.table.control_points()
         except ValueError:
             return
-        self.plot.plot(cp, n_times=self.n_times_spin.value())
+        self.plot.plot(cp, n_times=self.form.n_times.value)
 
     # ------------------------------------------------------------- job
+    def parameters(self) -> dict:
+        """The form's values (the input layer aside)."""
+        return {k: v for k, v in self.form.asdict().items() if k != "layer"}
+
     def make_job(self, layer, lf):
         from ...blur import simulate_blur
 
         cp = self.table.control_points()
-        params = {
-            "n_times": self.n_times_spin.value(),
-            "infinity_disparity": self.d_inf_spin.value(),
-            "device": self.device_combo.currentText(),
-        }
+        params = self.parameters()
         self._job = {"source": layer.name, "cp": cp, "params": params, "shape": lf.shape}
 
         def job():
             yield Progress("blur", 0, 1)
-            out = simulate_blur(lf, cp, n_times=params["n_times"],
-                                infinity_disparity=params["infinity_disparity"], device=params["device"])
+            out = simulate_blur(lf, cp, **params)
             yield Progress("blur", 1, 1)
             return out
 

@@ -1,0 +1,269 @@
+"""Form pieces shared by the dock widgets, built from ``magicgui.widgets``.
+
+- :func:`spin`, :func:`fspin`, :func:`device_choice`: value widgets with the
+  plugin's ranges and tooltips;
+- :class:`LayerChoice`: a combo box of the viewer's layers, kept in sync with it;
+- :class:`PathTable`: an editable ``(n, 3)`` table of Bezier control points;
+- :class:`PathSource`: take a path from another layer or a JSON file;
+- :func:`heading`: a section heading;
+- ``notify_*``: napari notifications.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox, Table
+from napari.utils.notifications import show_error, show_info, show_warning
+
+from ...path import load_path_json, validate_control_points
+from ..layers import LayerError, control_points_from_layer, layer_kind
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "DEVICES",
+    "LayerChoice",
+    "PathSource",
+    "PathTable",
+    "device_choice",
+    "fspin",
+    "has_path",
+    "heading",
+    "is_image",
+    "is_lightfield",
+    "notify_error",
+    "notify_info",
+    "notify_warning",
+    "spin",
+]
+
+#: the device choices of every widget
+DEVICES = ("auto", "cpu", "cuda")
+
+
+def notify_error(message: str) -> None:
+    """Show an error notification (never raises)."""
+    log.info("lfdeblur error: %s", message)
+    show_error(message)
+
+
+def notify_info(message: str) -> None:
+    """Show an info notification."""
+    show_info(message)
+
+
+def notify_warning(message: str) -> None:
+    """Show a warning notification."""
+    show_warning(message)
+
+
+def spin(name: str, value: int, lo: int, hi: int, label: str | None = None, tooltip: str = "") -> SpinBox:
+    """An integer field of a form."""
+    return SpinBox(name=name, label=label or name, value=value, min=lo, max=hi, tooltip=tooltip)
+
+
+def fspin(name: str, value: float, lo: float, hi: float, step: float = 0.1, label: str | None = None,
+          tooltip: str = "") -> FloatSpinBox:
+    """A floating-point field of a form (the step sets the shown decimals)."""
+    return FloatSpinBox(name=name, label=label or name, value=value, min=lo, max=hi, step=step, tooltip=tooltip)
+
+
+def device_choice() -> ComboBox:
+    """The ``device`` field: auto / cpu / cuda."""
+    return ComboBox(name="device", choices=DEVICES, value="auto",
+                    tooltip="torch device: auto picks CUDA when available")
+
+
+def heading(text: str) -> Label:
+    """A bold section heading."""
+    return Label(value=f"<b>{text}</b>")
+
+
+# ---------------------------------------------------------------- layers
+
+
+def is_image(layer) -> bool:
+    """Whether ``layer`` is an Image layer."""
+    return layer_kind(layer) == "image"
+
+
+def has_path(layer) -> bool:
+    """Whether ``layer``'s metadata holds a camera path."""
+    return "control_points" in getattr(layer, "metadata", {})
+
+
+def is_lightfield(layer) -> bool:
+    """Whether ``layer`` is a 4D (5D RGB) single-scale Image layer."""
+    if not is_image(layer) or getattr(layer, "multiscale", False):
+        return False
+    return layer.data.ndim == (5 if layer.rgb else 4)
+
+
+class LayerChoice(ComboBox):
+    """A combo box of the viewer's layers, refreshed as layers come and go.
+
+    Its ``value`` is the chosen layer (or None). When the chosen layer goes
+    away, or none was chosen, the newest usable layer is taken (none, for a
+    ``nullable`` choice).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    predicate : callable, optional
+        ``predicate(layer) -> bool`` keeps only some layers.
+    nullable : bool
+        Offer an empty choice first.
+    **kwargs
+        ``name``, ``label``, ``tooltip`` of the field.
+    """
+
+    def __init__(self, viewer, predicate=None, nullable: bool = False, **kwargs):
+        self._viewer = viewer
+        self._predicate = predicate or (lambda layer: True)
+        super().__init__(choices=self._layer_choices, nullable=nullable, **kwargs)
+        for event in (viewer.layers.events.inserted, viewer.layers.events.removed, viewer.layers.events.moved):
+            event.connect(self.reset_choices)
+        self.reset_choices()
+
+    def _layer_choices(self, _widget=None):
+        return [(layer.name, layer) for layer in self._viewer.layers if self._predicate(layer)]
+
+    def reset_choices(self, *_):
+        """Re-read the viewer's layers, keeping the chosen one when it is still there."""
+        previous = self.value
+        super().reset_choices()
+        layers = [layer for layer in self.choices if layer is not None]
+        if previous is not None and any(layer is previous or layer == previous for layer in layers):
+            if self.value is not previous:
+                self.value = previous
+        elif not self._nullable and layers:
+            self.value = layers[-1]
+        elif self._nullable:
+            self.value = None
+
+    def set_layer(self, layer_or_name) -> None:
+        """Choose a layer (or a layer name)."""
+        self.reset_choices()
+        name = getattr(layer_or_name, "name", layer_or_name)
+        self.value = self.get_choice(name)
+
+
+# ------------------------------------------------------------------ path
+
+COLUMNS = ("p_x (views)", "p_y (views)", "p_z (views/x~)")
+
+
+class PathTable(Container):
+    """An editable table of Bezier control points ``(p_x, p_y, p_z)``, one per row.
+
+    Its ``changed`` signal fires when a cell is edited or the points are set.
+    """
+
+    def __init__(self, control_points=None, name: str = "path_table"):
+        self.table = Table(name="table", tooltip="Bezier control points of the camera path "
+                           "(units: docs/model.md); edit freely")
+        self.table.min_height = 110
+        header = self.table.native.horizontalHeader()
+        header.setSectionResizeMode(header.ResizeMode.Stretch)
+        self.add_button = PushButton(name="add_point", text="+ point")
+        self.remove_button = PushButton(name="remove_point", text="- point")
+        self.add_button.changed.connect(self._add_row)
+        self.remove_button.changed.connect(self._remove_row)
+        buttons = Container(layout="horizontal", widgets=[self.add_button, self.remove_button], labels=False)
+        buttons.margins = (0, 0, 0, 0)
+        super().__init__(name=name, widgets=[self.table, buttons], labels=False)
+        self.margins = (0, 0, 0, 0)
+        self.set_control_points(np.zeros((2, 3)) if control_points is None else control_points)
+
+    def _set_rows(self, rows) -> None:
+        rows = [list(r) for r in rows]
+        # rows are numbered from 1, like the points in error messages
+        self.table.value = {"data": rows, "index": list(range(1, len(rows) + 1)), "columns": list(COLUMNS)}
+        self.changed.emit(self)
+
+    def set_control_points(self, control_points) -> None:
+        """Fill the table with an ``(n, 3)`` array (shown to 6 significant digits)."""
+        cp = validate_control_points(control_points)
+        # no '-0' or '1e-17' in the table
+        self._set_rows([[0.0 if abs(v) < 1e-9 else float(f"{v:.6g}") for v in row] for row in cp])
+
+    def control_points(self) -> np.ndarray:
+        """The table as a float64 ``(n, 3)`` array.
+
+        Raises
+        ------
+        ValueError
+            On an empty or non-numeric cell, or fewer than 2 rows.
+        """
+        rows = []
+        for i, cells in enumerate(self.table.data.to_list()):
+            row = []
+            for j, cell in enumerate(cells):
+                try:
+                    row.append(float(cell))
+                except (TypeError, ValueError):
+                    raise ValueError(
+                        f"control point {i + 1}, column {'xyz'[j]}: {cell!r} is not a number"
+                    ) from None
+            rows.append(row)
+        return validate_control_points(np.array(rows, dtype=np.float64).reshape(-1, 3))
+
+    def _add_row(self, *_):
+        rows = self.table.data.to_list()
+        self._set_rows(rows + [list(rows[-1]) if rows else [0.0, 0.0, 0.0]])
+
+    def _remove_row(self, *_):
+        rows = self.table.data.to_list()
+        if len(rows) > 2:
+            self._set_rows(rows[:-1])
+
+
+class PathSource(Container):
+    """Take a path from a layer holding one (*Take path*) or from a path JSON file.
+
+    ``on_path(control_points, metadata)`` is called with the path found and
+    the metadata it came with (a layer's, or ``{}`` for a file).
+    """
+
+    def __init__(self, viewer, on_path, title: str = "lfdeblur"):
+        self._on_path = on_path
+        self._title = title
+        self.path_layer = LayerChoice(
+            viewer, predicate=has_path, nullable=True, name="path_layer", label="take path from",
+            tooltip="a layer whose metadata holds a camera path (path layers, results)")
+        self.take_button = PushButton(name="take", text="Take path")
+        self.json_file = FileEdit(name="json_file", label="path JSON", mode="r", filter="*.json",
+                                  tooltip="a camera path saved by save_path_json / the writers")
+        self.take_button.changed.connect(self.take_path)
+        self.json_file.changed.connect(self.load_json)
+        super().__init__(name="path_source", widgets=[self.path_layer, self.take_button, self.json_file])
+        self.margins = (0, 0, 0, 0)
+
+    def take_from(self, layer, quiet: bool = False) -> bool:
+        """Hand on the path of ``layer``; False (and a notification unless ``quiet``) when it has none."""
+        try:
+            cp = control_points_from_layer(layer)
+        except LayerError as exc:
+            if not quiet:
+                notify_error(f"{self._title}: {exc}")
+            return False
+        self._on_path(cp, dict(layer.metadata))
+        return True
+
+    def take_path(self, *_):
+        """Hand on the path of the layer chosen in *take path from*."""
+        self.take_from(self.path_layer.value)
+
+    def load_json(self, *_):
+        """Hand on the path of the chosen JSON file."""
+        name = self.json_file.value
+        if not name or not str(name).lower().endswith(".json"):
+            return
+        try:
+            cp = load_path_json(name)
+        except (OSError, ValueError) as exc:
+            notify_error(f"{self._title}: {exc}")
+            return
+        self._on_path(cp, {})
