@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["tap_kernel", "Taps", "TapBlur"]
+__all__ = ["tap_kernel", "Taps", "TapBlur", "fold", "rows_per_block"]
 
 
 # --------------------------------------------- angular blur as offset taps
@@ -73,11 +73,11 @@ def tap_kernel(s_u: torch.Tensor, s_v: torch.Tensor, U: int, V: int):
     return K, ov, ou
 
 
-def _rows_per_block(n_per_row: int, budget: int, Y: int) -> int:
+def rows_per_block(n_per_row: int, budget: int, Y: int) -> int:
     return int(max(1, min(Y, budget // max(1, n_per_row))))
 
 
-def _fold(padded: torch.Tensor, dim: int, index: list, size: int) -> torch.Tensor:
+def fold(padded: torch.Tensor, dim: int, index: list, size: int) -> torch.Tensor:
     """Adjoint of ``padded = t.index_select(dim, index)``: add each padded slice onto its source.
 
     A loop of slice additions: ``index_add_`` was measured far slower on a
@@ -111,7 +111,7 @@ class Taps:
         self.iv_list, self.iu_list = self.iv.tolist(), self.iu.tolist()
         active = (self.Kt.abs().amax(dim=(2, 3)) > 0).nonzero().tolist()
         self.taps = [(int(i), int(j)) for i, j in active]
-        self.step = _rows_per_block((V + Dv - 1) * (U + Du - 1) * X * C, block_elements, Y)
+        self.step = rows_per_block((V + Dv - 1) * (U + Du - 1) * X * C, block_elements, Y)
 
     def blocks(self):
         Y = self.shape[2]
@@ -154,8 +154,8 @@ class Taps:
                 for i, j in self.taps:
                     gp[i : i + V, j : j + U].addcmul_(Gb, self.Kt[i, j, rows])
                 # adjoint of the replicate padding: add padded views back onto the edges
-                gv = _fold(gp, 0, self.iv_list, V)
-                gL[:, :, rows] = _fold(gv, 1, self.iu_list, U).permute(0, 1, 3, 4, 2)
+                gv = fold(gp, 0, self.iv_list, V)
+                gL[:, :, rows] = fold(gv, 1, self.iu_list, U).permute(0, 1, 3, 4, 2)
         gK = gKt.permute(2, 3, 0, 1) if need_K else None
         return gL, gK
 

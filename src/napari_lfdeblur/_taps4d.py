@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import torch
 
+from ._taps import fold, rows_per_block
+
 __all__ = ["pair_splat", "tap_kernel_4d", "Taps4D", "TapBlur4D"]
 
 
@@ -101,20 +103,6 @@ def tap_kernel_4d(s_u: torch.Tensor, s_v: torch.Tensor, d_inf: float, shape):
     return K, offsets
 
 
-def _rows_per_block(n_per_row: int, budget: int, Y: int) -> int:
-    return int(max(1, min(Y, budget // max(1, n_per_row))))
-
-
-def _fold(padded: torch.Tensor, dim: int, index: list, size: int) -> torch.Tensor:
-    """Adjoint of ``padded = t.index_select(dim, index)`` for a short ``index``."""
-    shape = list(padded.shape)
-    shape[dim] = size
-    out = padded.new_zeros(shape)
-    for i, src in enumerate(index):
-        out.select(dim, src).add_(padded.select(dim, i))
-    return out
-
-
 class Taps4D:
     """Block-wise application of a 4D tap kernel, its adjoint and its kernel gradient (no autograd).
 
@@ -138,7 +126,7 @@ class Taps4D:
         self.pad_y = (self.lo[1], hi[1])
         self.taps = [(a - self.lo[0], b - self.lo[1], c - self.lo[2], e - self.lo[3]) for a, b, c, e in off]
         per_row = len(self.iv) * len(self.iu) * len(self.ix) * C
-        self.step = _rows_per_block(per_row, block_elements, Y)
+        self.step = rows_per_block(per_row, block_elements, Y)
 
     def blocks(self):
         Y = self.shape[2]
@@ -186,7 +174,7 @@ class Taps4D:
                 for s, tap in enumerate(self.taps):
                     self._slice(gp, tap, n).addcmul_(Gb, self.K[s, block])
                 # adjoint of the padding: v and u (few) by slices, x and y by index_add
-                g = _fold(_fold(gp, 0, self.iv_list, V), 1, self.iu_list, U)
+                g = fold(fold(gp, 0, self.iv_list, V), 1, self.iu_list, U)
                 g = g.new_zeros(g.shape[:4] + (X,)).index_add_(4, self.ix, g)
                 gL.index_add_(2, rows, g.permute(0, 1, 3, 4, 2))
         return gL, gK
