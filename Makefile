@@ -1,7 +1,8 @@
 # Two commands set up and run everything on a fresh machine:
 #   make demo   - create .venv, install the package, run the main job on built-in data
-#   make test   - the same set-up plus a virtual display, then the whole test suite, then the
-#                 built wheel installed into a fresh virtual environment and smoke-tested
+#   make test   - the same set-up plus a virtual display, then the whole test suite, the tests of
+#                 the benchmark scripts, and the built wheel installed into a fresh virtual
+#                 environment and smoke-tested
 SHELL := /bin/bash
 PYTHON ?= python3
 VENV ?= .venv
@@ -43,6 +44,7 @@ demo: $(VENV)/.installed
 
 test: install-test
 	xvfb-run -a $(PY) -m pytest
+	$(PY) -m pytest -q benchmarks/tests
 	$(MAKE) wheel-test
 
 # build the sdist and the wheel, install the wheel (not editable) into a fresh environment, smoke-test it
