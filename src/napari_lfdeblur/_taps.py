@@ -80,8 +80,8 @@ def rows_per_block(n_per_row: int, budget: int, Y: int) -> int:
 def fold(padded: torch.Tensor, dim: int, index: list, size: int) -> torch.Tensor:
     """Adjoint of ``padded = t.index_select(dim, index)``: add each padded slice onto its source.
 
-    A loop of slice additions: ``index_add_`` was measured far slower on a
-    busy 2-core CPU for these few, large slices.
+    A loop of slice additions, which suits these few, large slices better
+    than ``index_add_``.
     """
     shape = list(padded.shape)
     shape[dim] = size
