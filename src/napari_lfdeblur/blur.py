@@ -302,6 +302,13 @@ class BlurOperator:
         K, offsets = self._kernel
         return Taps4D(self.shape, K.detach(), offsets, self.block_elements).adjoint(G)
 
+    @property
+    def n_taps(self) -> int:
+        """Passes over the light field one forward costs: the kernel's offsets that carry weight."""
+        if self.infinity_disparity == 0.0:
+            return int((self._kernel[0].detach().abs().amax(dim=(0, 1)) > 0).sum())
+        return int(self._kernel[0].shape[0])
+
     def is_in_plane(self) -> bool:
         """True when ``p_z = 0`` and ``d_inf = 0``: the blur is the same 4D convolution at every pixel."""
         return self.infinity_disparity == 0.0 and bool((self.control_points[:, 2] == 0).all())
