@@ -522,6 +522,14 @@ def test_bad_missing_hci_view(tmp_path, lf_gray):
         read_lightfield(folder)
 
 
+def test_hci_scheme_on_a_folder_without_hci_names(tmp_path, lf_gray):
+    folder = tmp_path / "not_hci"
+    folder.mkdir()
+    iio.imwrite(folder / "view_01_01.png", _u8(lf_gray[0, 0]))
+    with pytest.raises(LightFieldFormatError, match="no view file names match the 'hci'"):
+        read_lightfield(folder, layout="hci")
+
+
 def test_bad_views_of_different_sizes(views8, lf_rgb):
     iio.imwrite(views8 / "view_03_02.png", _u8(lf_rgb[2, 1, :-1]))
     with pytest.raises(LightFieldFormatError, match="view_03_02.png.*same size"):

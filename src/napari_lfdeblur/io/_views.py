@@ -138,6 +138,8 @@ def _hci_views(folder: Path, names, grid):
             if k in idx:
                 dup.append(f"{idx[k]} and {n}")
             idx[k] = n
+    if not idx:
+        raise LightFieldFormatError(f"{folder}: no view file names match the 'hci' naming scheme (input_CamNNN)")
     total = max(idx) + 1
     if grid is not None:
         V, U = (int(g) for g in grid)
