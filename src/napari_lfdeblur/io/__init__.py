@@ -186,6 +186,9 @@ def probe_layout(path) -> str | None:
             import scipy.io
 
             return layout if any(n == "LF" and len(s) in (4, 5) for n, s, _c in scipy.io.whosmat(p)) else None
+        if layout == "eslf":
+            with open(p, "rb") as fh:
+                return layout if fh.read(8) == b"\x89PNG\r\n\x1a\n" else None
         return layout
     except Exception:  # noqa: BLE001 - a probe never raises
         return None
