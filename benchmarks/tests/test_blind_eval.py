@@ -1,4 +1,4 @@
-"""Smoke test of benchmarks/blind_eval.py at tiny sizes (baseline only), and its bookkeeping."""
+"""Smoke test of benchmarks/blind_eval.py at tiny sizes (non-blind truepath only), its cases and bookkeeping."""
 
 import importlib.util
 import json
@@ -25,98 +25,130 @@ def blind_eval():
         sys.modules.pop("blind_eval", None)
 
 
-def test_quick_run_writes_a_table(blind_eval, tmp_path, capsys):
+def test_quick_run_writes_a_table(blind_eval, tmp_path):
     out, js = tmp_path / "eval.md", tmp_path / "eval.json"
-    assert blind_eval.main(["--quick", "--methods", "baseline2d", "--output", str(out), "--json", str(js)]) == 0
+    # dev04: a rendered scene at d_inf = 0 (always available); truepath is the cheap, non-blind method
+    assert blind_eval.main(["--quick", "--cases", "dev04", "--methods", "truepath", "--output", str(out),
+                            "--json", str(js)]) == 0
     text = out.read_text()
-    assert "Quick smoke run" in text and "| syn-p2 | baseline2d |" in text
-    rows = json.loads(js.read_text())["rows"]
+    assert "Quick smoke run" in text and "Development split" in text
+    assert "| dev04 | rendered | +0 |" in text and "| truepath |" in text
+    data = json.loads(js.read_text())
+    rows = data["rows"]
     inp = next(r for r in rows if r["method"] == "input (blurred)")
-    base = next(r for r in rows if r["method"] == "baseline2d")
+    tp = next(r for r in rows if r["method"] == "truepath")
     # the input's path error is that of "no motion": a blur mismatch of exactly 1
     assert inp["blur_mismatch"] == pytest.approx(1.0, rel=1e-4)
-    assert base["gain"] == pytest.approx(base["psnr"] - inp["psnr"])
-    assert base["seconds"] > 0 and "blur_mismatch" not in base  # the 2D baseline estimates no path
+    assert tp["gain"] == pytest.approx(tp["psnr"] - inp["psnr"]) and tp["gain"] > 0
+    assert tp["seconds"] > 0 and "blur_mismatch" not in tp  # the true path is given, not estimated
+    assert len(data["cases"]) == 1 and data["split"] == "dev"
 
 
-def test_partial_report_is_marked(blind_eval, tmp_path):
-    import argparse
-
-    args = argparse.Namespace(quick=False, cases_for=[], note=[], json=None)
-    env = {"machine": "m", "device": "cpu", "torch": "t", "threads": 1, "date": "d", "command": "c", "load_start": "0"}
-    rows = [{"case": "syn-p1", "method": "input (blurred)", "psnr": 30.0}]
-    out = tmp_path / "partial.md"
-    blind_eval.write(rows, [], ["baseline2d"], {}, args, env, out, final=False, n_done=1, n_all=6)
-    text = out.read_text()
-    assert "**Partial: 1 of 6 cases done" in text and "| syn-p1 | input (blurred) | 30.00 |" in text
+def test_splits_cover_the_set_and_do_not_overlap(blind_eval):
+    es = blind_eval.eval_set
+    dev, test = es.split_cases("dev"), es.split_cases("test")
+    assert len(dev) == 18 and len(test) == 24
+    for cases in (dev, test):
+        assert {c.group for c in cases} == set(es.GROUPS)
+        assert {c.infinity_disparity for c in cases} == set(es.D_INF)
+        assert {c.noise for c in cases} == set(es.NOISE)
+        for g in es.GROUPS:  # each group: d_inf = 0 and != 0, both noise levels
+            sel = [c for c in cases if c.group == g]
+            assert {c.infinity_disparity == 0 for c in sel} == {True, False}
+            assert {c.noise for c in sel} == set(es.NOISE)
+        kinds = [c.kind for c in cases]
+        assert kinds.count("none") == 1 and kinds.count("barely") == 2  # the "do no harm" cases
+        assert all(0.3 <= c.extent <= 4.0 for c in cases if c.kind != "none")
+        assert sum(c.z_ratio > 0 for c in cases) > len(cases) / 2  # most paths move in z
+    assert not {c.scene for c in dev} & {c.scene for c in test}
+    assert not {c.path_seed for c in dev} & {c.path_seed for c in test}
+    assert es.split_cases("dev") == dev  # fixed: the same on every call
+    with pytest.raises(ValueError, match="unknown split"):
+        es.split_cases("train")
 
 
 def test_case_ground_truth_is_in_the_zero_mean_gauge(blind_eval):
     from napari_lfdeblur import bezier_positions, simulate_blur
 
-    case = blind_eval.make_case("syn-p3", quick=True)
+    spec = next(c for c in blind_eval.eval_set.split_cases("dev") if c.group == "rendered" and c.z_ratio > 0
+                and c.infinity_disparity != 0 and c.kind == "blurred")
+    case = blind_eval.make_case(spec, quick=True)
     assert np.abs(bezier_positions(case.control_points, blind_eval.RENDER_TIMES).mean(0)).max() < 1e-12
     pos = bezier_positions(case.control_points, 500)
     diameter = np.sqrt(((pos[:, None] - pos[None]) ** 2).sum(-1)).max()
-    assert diameter == pytest.approx(blind_eval.PATHS["p3"][1], rel=1e-2)
-    assert np.ptp(pos[:, 2]) > 0.1  # p3 moves in z
-    # the blurred input is the T=128 blur of the ground truth plus small noise
-    clean = simulate_blur(case.sharp, case.control_points, n_times=blind_eval.RENDER_TIMES)
+    assert diameter == pytest.approx(spec.extent, rel=1e-2)
+    assert np.ptp(pos[:, 2]) > 0.05
+    # the blurred input is the T=128 blur at the case's d_inf of the ground truth, plus the case's noise
+    clean = simulate_blur(case.sharp, case.control_points, n_times=blind_eval.RENDER_TIMES,
+                          infinity_disparity=spec.infinity_disparity)
     resid = case.blurred - clean
-    assert abs(resid.std() - blind_eval.NOISE_SIGMA) < 3e-4
+    assert abs(resid.std() - spec.noise) < 0.15 * spec.noise
     with pytest.raises(ValueError, match="unknown case"):
-        blind_eval.make_case("syn-p99", quick=True)
+        blind_eval.select_cases("dev", ["test03"])
+
+
+def test_no_blur_case_is_the_sharp_light_field_plus_noise(blind_eval):
+    spec = next(c for c in blind_eval.eval_set.split_cases("dev") if c.kind == "none")
+    assert not blind_eval.eval_set.true_path(spec).any()
+    if blind_eval.eval_set.capture_available(spec.group):
+        case = blind_eval.make_case(spec, quick=True)
+        assert np.abs(case.blurred - case.sharp).max() < 8 * spec.noise
+
+
+def test_partial_report_is_marked_and_says_the_split(blind_eval, tmp_path):
+    import argparse
+
+    args = argparse.Namespace(quick=False, note=[], json=None, split="test", frozen=False, method_list=["truepath"])
+    env = {"machine": "m", "device": "cpu", "torch": "t", "threads": 1, "command": "c"}
+    rows = [{"case": "test03", "group": "rendered", "d_inf": 0.5, "method": "input (blurred)", "psnr": 30.0}]
+    specs = blind_eval.eval_set.split_cases("test")[:4]
+    out = tmp_path / "partial.md"
+    blind_eval.write(rows, [], specs, {}, args, env, out, final=False, n_done=1, n_all=6)
+    text = out.read_text()
+    assert "**Partial: 1 of 6 cases done" in text and "| test03 | rendered | +0.5 |" in text
+    assert "not marked frozen" in text
+    args.frozen = True
+    blind_eval.write(rows, [], specs, {}, args, env, out, final=False, n_done=1, n_all=6)
+    assert "run once, after the method was frozen" in out.read_text()
+    assert blind_eval.table_for("test").name == "blind_eval_test.md"
 
 
 def test_targets_are_checked_not_assumed(blind_eval):
     rows = [
-        {"case": "a", "method": "default", "psnr": 30.0, "angular": 0.01},
-        {"case": "b", "method": "default", "psnr": 30.0, "angular": 0.01},
-        {"case": "a", "method": "baseline2d", "psnr": 31.0, "angular": 0.02},
-        {"case": "c", "method": "baseline2d", "psnr": 10.0, "angular": 0.00},  # not paired
+        {"case": "a", "group": "rendered", "d_inf": 0.0, "method": "default", "gain": 6.0, "blur_mismatch": 0.1,
+         "seconds": 50.0},
+        {"case": "b", "group": "Illum", "d_inf": 1.0, "method": "default", "gain": -0.5, "blur_mismatch": 0.9,
+         "seconds": 70.0},
+        {"case": "b", "group": "Illum", "d_inf": 1.0, "method": "truepath", "gain": 7.0, "seconds": 3.0},
     ]
-    means = [
-        {"method": "default", "group": "all", "seconds": 50.0, "seconds_max": 70.0, "gain": 4.5, "blur_mismatch": 0.15},
-        # a subgroup's means never stand in for the means over all cases
-        {"method": "default", "group": "held-out", "seconds": 5.0, "seconds_max": 5.0, "gain": 1.0, "blur_mismatch": 0.9},
-    ]
-    lines = blind_eval.targets(means, quick=False, rows=rows)
-    met = [line for line in lines if line.startswith("- met")]
+    means = blind_eval.summarise(rows, ["default", "truepath"])
+    lines = blind_eval.targets(means, quick=False)
     unmet = [line for line in lines if line.startswith("- **not met**")]
-    assert len(met) == 3 and len(unmet) == 2
-    assert any("60 s" in line for line in unmet) and any("PSNR above" in line for line in unmet)
-    assert any("angular" in line and "over 1 common" in line for line in met)
-    assert "did not run" in blind_eval.targets([], quick=False)[0]
+    met = [line for line in lines if line.startswith("- met")]
+    assert any("worse than the input" in line and "-0.50" in line for line in unmet)
+    assert any("60 s" in line for line in unmet)
+    assert any("`default`, all: mean gain" in line and "+2.75" in line for line in unmet)
+    assert any("`default`, Illum: mean gain" in line for line in unmet)
+    assert any("`default`, all: mean blur mismatch" in line for line in unmet)  # (0.1 + 0.9) / 2
+    assert any("`truepath`, d_inf ≠ 0" in line for line in met) and any("10 s" in line for line in met)
+    assert "no method" in blind_eval.targets([], quick=False)[0]
 
 
-def test_summary_skips_failures_and_nan(blind_eval):
+def test_summary_by_group_skips_failures_and_nan(blind_eval):
     rows = [
-        {"case": "a", "method": "baseline2d", "psnr": 30.0, "gain": 1.0},
-        {"case": "b", "method": "baseline2d", "psnr": 32.0, "gain": math.nan},
-        {"case": "c", "method": "baseline2d", "error": "RuntimeError: boom"},
+        {"case": "a", "group": "rendered", "d_inf": 0.0, "method": "input (blurred)", "psnr": 28.0},
+        {"case": "b", "group": "F01", "d_inf": 0.5, "method": "input (blurred)", "psnr": 30.0},
+        {"case": "a", "group": "rendered", "d_inf": 0.0, "method": "truepath", "psnr": 30.0, "gain": 2.0},
+        {"case": "b", "group": "F01", "d_inf": 0.5, "method": "truepath", "psnr": 31.0, "gain": 1.0,
+         "blur_mismatch": math.nan},
+        {"case": "c", "group": "F01", "d_inf": 0.5, "method": "truepath", "error": "RuntimeError: boom"},
     ]
-    (mean,) = blind_eval.summarise(rows, ["baseline2d"])
-    assert mean["psnr"] == pytest.approx(31.0) and mean["gain"] == pytest.approx(1.0)
-    assert mean["case"] == "**mean of 2**"
-
-
-def test_summary_gives_scene_family_means_apart(blind_eval):
-    rows = [
-        {"case": "syn-p1", "method": "default", "gain": 6.0},
-        {"case": "syn2-p4", "method": "default", "gain": 4.0},
-        {"case": "lytro-p1", "method": "default", "gain": 2.0},
-        {"case": "lytro3-p6", "method": "default", "gain": 1.0},
-        {"case": "lytro4-p8", "method": "default", "gain": 0.0},
-    ]
-    means = {m["group"]: m for m in blind_eval.summarise(rows, ["default"])}
-    assert means["all"]["gain"] == pytest.approx(2.6) and means["all"]["case"] == "**mean of 5**"
-    assert means["synthetic"]["gain"] == pytest.approx(5.0)
-    assert means["Lytro"]["gain"] == pytest.approx(1.0) and means["Lytro"]["case"] == "**mean of 3 Lytro**"
-    # one family only: no family means beside the overall one
-    assert [m["group"] for m in blind_eval.summarise(rows[:2], ["default"])] == ["all"]
-    cases = blind_eval.CASES
-    assert len(cases) == len(set(cases)) == 22
-    assert sum(blind_eval._family(c) == "syn" for c in cases) == sum(blind_eval._family(c) == "lytro" for c in cases)
+    means = {m["group"]: m for m in blind_eval.summarise(rows, ["truepath"])}
+    assert set(means) == {"all", "rendered", "F01", "d_inf = 0", "d_inf ≠ 0"}
+    assert means["all"]["n"] == 2 and means["all"]["gain"] == pytest.approx(1.5)
+    assert means["all"]["blurred_psnr"] == pytest.approx(29.0) and means["all"]["blur_mismatch"] is None
+    assert means["all"]["worst_gain"] == 1.0 and means["all"]["worst_case"] == "b"
+    assert means["d_inf = 0"]["psnr"] == pytest.approx(30.0) and means["F01"]["n"] == 1
 
 
 def test_peak_memory_sees_an_allocation(blind_eval):

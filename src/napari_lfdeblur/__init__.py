@@ -39,6 +39,7 @@ _PUBLIC = {
     "views_transposed": "epi",
     # sample data
     "synthetic_scene": "samples",
+    "procedural_scene": "samples",
     "lytro_sample": "samples",
     # I/O
     "read_lightfield": "io",
