@@ -44,20 +44,25 @@ from .progress import Progress, run_to_completion
 from .blur import BlurOperator, from_tensor, to_tensor, validate_frame
 from .devices import select_device
 from .path import validate_control_points, validate_n_times
-from .priors import divergence4d, gradient_norm_bound, project_tv_dual
 from .special_cases import inplane_matrix, solve_inplane
+from ._tv_solvers import estimate_noise_sigma, iter_fista_tv
 
 __all__ = [
     "DeconvolutionParams",
     "METHODS",
     "deconvolve",
+    "estimate_noise_sigma",
     "iter_deconvolve",
 ]
 
 METHODS = ("auto", "tv", "inplane")
 
-#: default regularisation weight of each method
-DEFAULT_WEIGHTS = {"tv": 2e-3, "inplane": 2e-3}
+#: default Tikhonov weight of ``'inplane'``
+INPLANE_WEIGHT = 2e-3
+#: ``'tv'``'s default weight is this factor times the noise level estimated in the data
+NOISE_WEIGHT_FACTOR = 0.3
+#: inner (dual) iterations of the TV proximal map per outer iteration
+N_INNER = 5
 
 
 # ------------------------------------------------------------ parameters
@@ -121,9 +126,29 @@ class DeconvolutionParams(JsonParams):
         object.__setattr__(self, "isotropic", bool(self.isotropic))
         object.__setattr__(self, "clip", bool(self.clip))
 
-    def effective_weight(self, method: str) -> float:
-        """The weight used by ``method`` (the default when ``weight`` is None)."""
-        return DEFAULT_WEIGHTS[method] if self.weight is None else self.weight
+    def effective_weight(self, method: str, sigma: float | None = None) -> float:
+        """The weight used by ``method``.
+
+        Parameters
+        ----------
+        method : {'tv', 'inplane'}
+        sigma : float, optional
+            The noise level of the data (:func:`estimate_noise_sigma`); needed
+            by ``'tv'`` when ``weight`` is None.
+
+        Returns
+        -------
+        float
+            ``weight`` when set; otherwise ``NOISE_WEIGHT_FACTOR * sigma`` for
+            ``'tv'`` and ``INPLANE_WEIGHT`` for ``'inplane'``.
+        """
+        if self.weight is not None:
+            return self.weight
+        if method == "inplane":
+            return INPLANE_WEIGHT
+        if sigma is None:
+            raise ValueError("the noise rule of the 'tv' weight needs sigma (see estimate_noise_sigma)")
+        return NOISE_WEIGHT_FACTOR * float(sigma)
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -148,83 +173,19 @@ def _make_params(params, overrides) -> DeconvolutionParams:
 # ----------------------------------------------------------------- TV
 
 
-def _add_gradient_(Y, x, alpha: float, axis_weights):
-    """``Y[a] += alpha * w_a * D_a x`` in place, without a temporary per axis."""
-    for axis in range(4):
-        n = x.shape[axis]
-        if n < 2 or axis_weights[axis] == 0:
-            continue
-        hi, lo = x.narrow(axis, 1, n - 1), x.narrow(axis, 0, n - 1)
-        y = Y[axis].narrow(axis, 0, n - 1)
-        y.add_(hi, alpha=alpha * axis_weights[axis]).sub_(lo, alpha=alpha * axis_weights[axis])
-
-
-def _tv_value(x, isotropic, axis_weights) -> float:
-    """``TV4(x)`` without materialising the four gradient components at once."""
-    acc = torch.zeros_like(x) if isotropic else None
-    total = 0.0
-    for axis in range(4):
-        n = x.shape[axis]
-        if n < 2 or axis_weights[axis] == 0:
-            continue
-        diff = x.narrow(axis, 1, n - 1) - x.narrow(axis, 0, n - 1)
-        if axis_weights[axis] != 1.0:
-            diff.mul_(axis_weights[axis])
-        if isotropic:
-            acc.narrow(axis, 0, n - 1).addcmul_(diff, diff)
-        else:
-            total += float(diff.abs().sum())
-    return float(acc.sqrt_().sum()) if isotropic else total
-
-
-@torch.no_grad()  # entered at each resume and left at each yield: never leaks to the caller
-def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: DeconvolutionParams, weight, ndim):
-    """Condat-Vu primal-dual iterations for ``1/2 ||K x - f||^2 + w TV4(x)`` (+ box)."""
-    aw = params.axis_weights
-    lo, hi = None, None
+def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: DeconvolutionParams, weight, sigma, ndim):
+    """FISTA with a warm-started TV prox for ``1/2 ||K x - f||^2 + w TV4(x)`` (+ box); yields Progress."""
+    box = None
     if params.clip and float(f.min()) >= 0.0 and float(f.max()) <= 1.0:
-        lo, hi = 0.0, 1.0
-    # ||K||^2 <= ||K||_1 ||K||_inf; rows of K are averages of interpolations (sum 1, >= 0)
-    lip = max(1.0, float(op.adjoint(torch.ones_like(f)).max()))
-    knorm2 = gradient_norm_bound(aw)
-    tau = 1.3 / lip  # measured: a little faster than 1 / lip, still within the Condat-Vu condition
-    sigma = 0.99 * (1.0 / tau - lip / 2.0) / max(knorm2, 1e-12)
-    x = x0.clone()
-    if lo is not None:
-        x.clamp_(lo, hi)
-    dual = [torch.zeros_like(f) for _ in range(4)] if weight > 0 else None
-    n = params.n_iter
-    for it in range(1, n + 1):
-        resid = op.forward(x) - f
-        loss = 0.5 * float((resid * resid).sum())
-        grad = op.adjoint(resid)
-        del resid
-        if dual is not None:
-            loss += weight * _tv_value(x, params.isotropic, aw)
-            grad.sub_(divergence4d(dual, aw))
-        x_new = x - tau * grad
-        del grad
-        if lo is not None:
-            x_new.clamp_(lo, hi)
-        change = float(torch.linalg.vector_norm(x_new - x)) / max(float(torch.linalg.vector_norm(x_new)), 1e-12)
-        if dual is not None:
-            # dual ascent at the extrapolated point 2 x_new - x
-            _add_gradient_(dual, x_new, 2.0 * sigma, aw)
-            _add_gradient_(dual, x, -sigma, aw)
-            project_tv_dual(dual, weight, params.isotropic)
-        x = x_new
-        done = change < params.tol and it >= 3
-        yield Progress(
-            stage="tv",
-            iteration=it,
-            n_iterations=n,
-            loss=loss,
-            estimate=lambda x=x: from_tensor(x, ndim).copy(),
-            info={"relative_change": change, "weight": weight, "tau": tau, "sigma": sigma},
-        )
-        if done:
-            break
-    return x
+        box = (0.0, 1.0)
+
+    def record(it, x, info):
+        return Progress(stage="tv", iteration=it, n_iterations=params.n_iter, loss=info["objective"],
+                        estimate=lambda: from_tensor(x, ndim).copy(), info={**info, "weight": weight, "sigma": sigma})
+
+    return (yield from iter_fista_tv(op, f, x0, weight=weight, n_iter=params.n_iter, tol=params.tol,
+                                     isotropic=params.isotropic, axis_weights=params.axis_weights, box=box,
+                                     n_inner=N_INNER, record=record))
 
 
 # ------------------------------------------------------------ front end
@@ -291,7 +252,8 @@ def iter_deconvolve(
 
 
 def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
-    weight = p.effective_weight(method)
+    sigma = estimate_noise_sigma(arr) if method == "tv" else None
+    weight = p.effective_weight(method, sigma)
     f = to_tensor(arr, device=dev)
     if method == "inplane":
         M = inplane_matrix(cp, arr.shape[0], arr.shape[1], n_times=n_times)
@@ -303,7 +265,7 @@ def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
         return out
     op = BlurOperator(f.shape, cp, n_times=n_times, infinity_disparity=d_inf, device=dev, frame=frame)
     x0 = f if init is None else to_tensor(init, device=dev)
-    x = yield from _iter_tv(op, f, x0, p, weight, arr.ndim)
+    x = yield from _iter_tv(op, f, x0, p, weight, sigma, arr.ndim)
     return from_tensor(x, arr.ndim)
 
 
