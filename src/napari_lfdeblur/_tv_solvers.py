@@ -143,7 +143,22 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
 
 
 def estimate_noise_sigma(lf: np.ndarray) -> float:
-    """Robust noise standard deviation of a light field (median absolute finest diagonal Haar detail / 0.6745)."""
+    """Robust estimate of the standard deviation of white noise in a light field.
+
+    The median absolute value of the finest diagonal Haar wavelet detail of
+    every view (and channel), divided by 0.6745 (Donoho & Johnstone). Blur
+    removes fine detail but not the noise added after it, so in a blurred
+    light field this detail is mostly noise; what is left of the scene makes
+    the estimate err high, less so the noisier the data.
+
+    Parameters
+    ----------
+    lf : array_like, shape (V, U, Y, X[, C])
+
+    Returns
+    -------
+    float
+    """
     a = np.asarray(lf, dtype=np.float32)
     Y, X = a.shape[2] // 2 * 2, a.shape[3] // 2 * 2
     a = a[:, :, :Y, :X]

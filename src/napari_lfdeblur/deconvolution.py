@@ -6,27 +6,40 @@
   of :mod:`napari_lfdeblur.blur` and a 4D total-variation prior over all
   four axes ``(v, u, y, x)``,
 
-      min_l  1/2 ||K_p l - f||^2 + weight * TV4(l),
+      min_l  1/2 ||K_p l - f||^2 + weight * TV4(l),   l in [0, 1] (optional box),
 
-  solved by the primal-dual method of Condat and Vu (gradient steps on the
-  data term, dual projections for TV), with an optional box constraint to
-  ``[0, 1]`` and early stopping on the relative change of the iterate.
+  solved by FISTA [1]_ on the data term: each iteration takes one gradient
+  step (one blur forward and one adjoint) and the proximal map of
+  ``weight * TV4`` plus the box, computed by a few iterations of the fast
+  gradient projection on its dual [2]_, warm-started from the previous
+  iteration's dual field. The step ``1 / L`` uses an estimate of
+  ``L = ||K||^2`` that is raised whenever a step shows more curvature
+  (backtracking at no extra blur evaluation: ``K`` of the step is at hand);
+  momentum is restarted when the objective rises or the step turns back
+  [3]_. It stops when the objective decreases by less than ``tol`` times its
+  value in one iteration. The default weight is ``NOISE_WEIGHT_FACTOR``
+  times the noise level estimated in the data (:func:`estimate_noise_sigma`).
 * ``method='inplane'``: for an in-plane path (``p_z = 0``) and ``d_inf = 0``
   the exact angular solve of :func:`~napari_lfdeblur.special_cases.solve_inplane`
   (Tikhonov on the angular differences), one small matrix for all pixels.
 * ``method='auto'`` picks ``'inplane'`` when it applies and ``'tv'`` otherwise.
 
 The paper's analytic special cases (refocusing, the textured plane, the
-in-plane matrix) are in :mod:`napari_lfdeblur.special_cases`.
+in-plane matrix) are in :mod:`napari_lfdeblur.special_cases`. See
+``docs/deconvolution.md``.
 
 References
 ----------
-.. [1] L. Condat, "A primal-dual splitting method for convex optimization
-       involving Lipschitzian, proximable and linear composite terms",
-       J. Optim. Theory Appl. 158, 2013.
-.. [2] B. C. Vu, "A splitting algorithm for dual monotone inclusions
-       involving cocoercive operators", Adv. Comput. Math. 38, 2013.
-.. [3] P. P. Srinivasan, R. Ng and R. Ramamoorthi, "Light Field Blind Motion
+.. [1] A. Beck and M. Teboulle, "A fast iterative shrinkage-thresholding
+       algorithm for linear inverse problems", SIAM J. Imaging Sci. 2, 2009.
+.. [2] A. Beck and M. Teboulle, "Fast gradient-based algorithms for
+       constrained total variation image denoising and deblurring problems",
+       IEEE Trans. Image Process. 18, 2009.
+.. [3] B. O'Donoghue and E. Candes, "Adaptive restart for accelerated
+       gradient schemes", Found. Comput. Math. 15, 2015.
+.. [4] D. L. Donoho and I. M. Johnstone, "Ideal spatial adaptation by
+       wavelet shrinkage", Biometrika 81, 1994 (the MAD noise estimate).
+.. [5] P. P. Srinivasan, R. Ng and R. Ramamoorthi, "Light Field Blind Motion
        Deblurring", CVPR 2017.
 """
 
@@ -77,14 +90,18 @@ class DeconvolutionParams(JsonParams):
     method : {'auto', 'tv', 'inplane'}
         ``'auto'`` uses ``'inplane'`` when ``p_z = 0`` and ``d_inf = 0``.
     weight : float or None
-        Regularisation weight >= 0 (None: the method's default, 2e-3). For
-        ``'tv'`` it multiplies the 4D TV; for ``'inplane'`` the squared
-        angular gradient (Tikhonov). 0 gives the exact (pseudo-)inverse
-        for ``'inplane'``.
+        Regularisation weight >= 0. For ``'tv'`` it multiplies the 4D TV;
+        None (the default) sets it from the data: ``NOISE_WEIGHT_FACTOR *
+        sigma`` with ``sigma`` from :func:`estimate_noise_sigma` (the
+        optimal TV weight of the least-squares objective grows in proportion
+        to the noise level). For ``'inplane'`` it multiplies the squared
+        angular gradient (Tikhonov; None: 2e-3), and 0 gives the exact
+        (pseudo-)inverse.
     n_iter : int
-        Maximum iterations of ``'tv'``.
+        Maximum iterations of ``'tv'`` (each one blur forward and adjoint).
     tol : float
-        ``'tv'`` stops when ``||l_k - l_{k-1}|| / ||l_k|| < tol``.
+        ``'tv'`` stops at the first iteration whose objective ``F`` fell by
+        less than ``tol * F`` (a rise never stops it); 0 runs ``n_iter``.
     isotropic : bool
         Isotropic (True) or anisotropic 4D TV.
     axis_weights : tuple of 4 floats
