@@ -402,6 +402,25 @@ def test_bad_input_gives_clear_errors():
         PathFitParams(disparity_weight=-1.0)
 
 
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf"), 4.5, -4.01])
+def test_infinity_disparity_must_be_finite_and_within_the_views(bad):
+    good = np.zeros((5, 5, 16, 16), np.float32)  # bound: |d_inf| * 2 <= 16 / 2
+    with pytest.raises(ValueError, match="infinity_disparity"):
+        blind_deblur(good, infinity_disparity=bad)
+    with pytest.raises(ValueError, match="infinity_disparity"):
+        iter_blind_deblur(good, infinity_disparity=bad)  # checked when the generator is created
+
+
+def test_infinity_disparity_of_the_wrong_type_or_auto():
+    good = np.zeros((5, 5, 16, 16), np.float32)
+    for bad in ("1.0", None, True, [1.0]):
+        with pytest.raises(TypeError, match="infinity_disparity"):
+            iter_blind_deblur(good, infinity_disparity=bad)
+    with pytest.raises(ValueError, match="'auto' is not available.*farthest"):
+        iter_blind_deblur(good, infinity_disparity="auto")
+    assert blind.check_infinity_disparity(-4.0, good.shape) == -4.0  # the bound itself is allowed
+
+
 # ------------------------------------------------------------ pieces
 
 

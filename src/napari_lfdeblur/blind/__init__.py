@@ -84,14 +84,23 @@ import numpy as np
 import torch
 
 from .. import devices
+from .._lightfield import check_number
 from ..blur import validate_lightfield
 from ..path import bezier_positions, canonical_time_direction, center_path
 from ..progress import Progress, run_to_completion
 from ._alternating import iter_alternating, relay
 from ._disparity import gray, shear
+from ._evidence import blur_evidence, evidence_message
 from ._joint import iter_joint
 from ._memory import TILE_MARGIN, estimate_blind_memory, plan_tiles, tiles
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams
+
+#: why ``infinity_disparity='auto'`` is refused (docs/blind.md, "Where d_inf comes from")
+AUTO_MESSAGE = (
+    "infinity_disparity='auto' is not available: d_inf cannot be estimated from a blurred light field alone "
+    "(not at all on a single plane, where a longer path at another d_inf blurs it the same). Pass the disparity "
+    "of the farthest scene content (the sky, a far wall) in px/view, or the value your decoder states; "
+    "see docs/blind.md")
 
 __all__ = [
     "BlindParams",
@@ -219,13 +228,38 @@ def _validate_input(blurred, infinity_disparity):
         raise ValueError(f"blind deblurring needs at least 2 x 2 views; got {V} x {U}")
     if Y < 4 or X < 4:
         raise ValueError(f"blind deblurring needs views of at least 4 x 4 pixels; got {Y} x {X}")
-    if isinstance(infinity_disparity, bool) or not isinstance(infinity_disparity, (int, float, np.integer,
-                                                                                   np.floating)):
-        raise TypeError(f"infinity_disparity must be a number; got {infinity_disparity!r}")
-    d_inf = float(infinity_disparity)
-    if not math.isfinite(d_inf):
-        raise ValueError("infinity_disparity must be finite")
+    d_inf = check_infinity_disparity(infinity_disparity, arr.shape)
     return arr, d_inf
+
+
+def check_infinity_disparity(infinity_disparity, shape) -> float:
+    """``infinity_disparity`` as a float, checked against the light field's ``shape`` (V, U, Y, X[, C]).
+
+    The bound: ``|d_inf| * (max(V, U) - 1) / 2`` (the refocus of the
+    outermost view, whose offset from the centre is ``(max(V, U) - 1) / 2``
+    views) must not exceed half the smaller spatial size, ``min(Y, X) / 2``:
+    beyond it, more than half of the outermost views' samples fall outside
+    the view and are clamped to its border, and the model no longer sees the
+    scene there.
+
+    Raises
+    ------
+    TypeError
+        If it is not a real number (``'auto'`` gets a ValueError).
+    ValueError
+        If it is ``'auto'``, not finite or beyond the bound.
+    """
+    if isinstance(infinity_disparity, str) and infinity_disparity.strip().lower() == "auto":
+        raise ValueError(AUTO_MESSAGE)
+    d_inf = check_number(infinity_disparity, "infinity_disparity")
+    V, U, Y, X = shape[:4]
+    half = (max(V, U) - 1) / 2.0
+    if abs(d_inf) * half > min(Y, X) / 2.0:
+        raise ValueError(
+            f"infinity_disparity = {d_inf:g} px/view is beyond what {Y} x {X} views allow: the outermost view "
+            f"would be shifted by {abs(d_inf) * half:g} px, more than half the view; |infinity_disparity| must "
+            f"be at most {min(Y, X) / (2.0 * half):g}")
+    return d_inf
 
 
 def _make_params(params, overrides) -> BlindParams:
@@ -303,7 +337,12 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
         est = yield from iter_joint(g, d_inf, p, dev, rng, box, preview)
     info = {"device": str(dev), "box": box, **est.info}
     info["levels"] = [(crop.shape[2] // k, crop.shape[3] // k) for k in est.factors]
+    evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev)
+    info.update(blur_found=evidence["blur_found"], evidence=evidence, message=evidence_message(evidence))
     cp = est.control_points
+    if not evidence["blur_found"]:  # the path estimated, kept for inspection; the result has no blur
+        info["rejected_path"] = canonical_time_direction(center_path(cp, p.n_times))
+        cp = np.zeros_like(cp)
     if crop is not arr:
         # p_z in the crop's normalised coordinates -> the full frame's (x~ scales by r_crop / r_full)
         cp = np.array(cp, dtype=np.float64)
@@ -312,13 +351,29 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
     del g, f
-    if p.final is not None:
+    if p.final is not None and evidence["blur_found"]:
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()
     t2 = time.perf_counter()
     return BlindResult(lightfield=np.asarray(out, dtype=np.float32), control_points=cp, loss_history=est.loss_history,
                        params=p, timings={"path": t1 - t0, "final": t2 - t1, "total": t2 - t0}, info=info)
+
+
+def _iter_evidence(g, est, p: BlindParams, dev):
+    """Is the estimated blur significant? :func:`~napari_lfdeblur.blind._evidence.blur_evidence`, with progress.
+
+    ``g`` is the grayscale light field of the path stage in the ``d_inf = 0``
+    model (refocused by ``d_inf``), ``est`` the path stage's
+    :class:`~napari_lfdeblur.blind._params.PathEstimate`.
+    """
+    cp = center_path(est.control_points, p.n_times)
+
+    def report(_):  # placed at the start of the final stage: the fraction done stays monotone
+        return Progress(stage="evidence", iteration=0, n_iterations=1, loss=float("nan"),
+                        control_points=cp, stage_index=est.n_stages, n_stages=est.n_stages + 1)
+
+    return (yield from relay(blur_evidence(g, cp, p, dev), report))
 
 
 def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
