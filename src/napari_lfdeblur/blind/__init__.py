@@ -55,7 +55,13 @@ Two algorithms, chosen by :attr:`BlindParams.method`:
     with the 4D sparse-gradient prior ``R_eps = mean(min(|grad l|^2 / eps^2, 1))``
     and ``w``, ``eps`` annealed.
 
-The path found, every colour channel is restored by the non-blind
+The path found, the data decide whether its blur is significant: the
+salient-edge objective with the path's blur must beat the one with no blur
+(the identity) by more than the noise floor and by a clear fraction, and the
+blur must move the image by a good part of a pixel. If not, the result is
+the input itself with a zero path, and ``info['blur_found']`` is False
+(docs/blind.md, "What makes it robust"). If so, every colour channel is
+restored by the non-blind
 :func:`~napari_lfdeblur.deconvolution.deconvolve` with ``params.final``
 (4D TV in both presets), tile by tile when memory is short. Both methods
 return the path time-canonicalised
@@ -112,6 +118,8 @@ __all__ = [
     "blind_deblur",
     "iter_blind_deblur",
     "estimate_blind_memory",
+    "check_infinity_disparity",
+    "AUTO_MESSAGE",
 ]
 
 
@@ -135,7 +143,12 @@ def blind_deblur(
         Parameters, a dict of them (nested fields as sub-dicts), or a preset
         name (``'default'``, ``'paper'``). Default: the ``default`` preset.
     infinity_disparity : float, default 0.0
-        ``d_inf`` in px/view of the blur model.
+        ``d_inf`` in px/view of the blur model: the disparity of points at
+        infinity (0 for a camera focused at infinity; with zero disparity
+        on the focal plane, about the disparity of the farthest content).
+        Finite, with ``|d_inf| (max(V, U) - 1) / 2 <= min(Y, X) / 2``
+        (:func:`check_infinity_disparity`). ``'auto'`` is refused: it cannot
+        be estimated from the blurred light field (docs/blind.md).
     device : {'auto', 'cpu', 'cuda'}, default 'auto'
         Falls back to the CPU, with a warning, when the GPU lacks the memory.
     seed : int, default 0
@@ -151,12 +164,15 @@ def blind_deblur(
     -------
     BlindResult
         ``.lightfield`` (input shape, float32), ``.control_points`` ((n, 3),
-        zero-mean gauge), ``.loss_history``, ``.params``, ``.timings``.
+        zero-mean gauge), ``.loss_history``, ``.params``, ``.timings``,
+        ``.info`` (with ``'blur_found'``, ``'evidence'``, ``'message'``).
 
     Raises
     ------
     ValueError
-        On a malformed light field (wrong ndim, NaN) or invalid parameter values.
+        On a malformed light field (wrong ndim, NaN), invalid parameter values
+        or an ``infinity_disparity`` that is not finite, beyond the views or
+        ``'auto'``.
     TypeError
         On an unknown keyword or parameter of the wrong type.
     """
@@ -196,7 +212,10 @@ def iter_blind_deblur(
         its end); ``loss`` is the path fit at the end of an alternation
         (``info['phase'] == 'done'``) and NaN on the records inside one
         (``info['phase']`` ``'latent'`` or ``'path fit'``, with the current
-        best fit in ``info['fit']``).
+        best fit in ``info['fit']``). Then records of stage ``'evidence'``
+        (one per conjugate-gradient iteration of the evidence test, at the
+        start of the final stage's share) and, when blur is found, of the
+        final stage.
 
     Returns
     -------

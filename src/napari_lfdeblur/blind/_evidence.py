@@ -3,9 +3,11 @@
 After the path estimate, the grayscale light field is explained twice by a
 salient-edge latent of the same kind (:func:`~napari_lfdeblur.blind._latent.l0_latent`,
 same weight): once through the estimated blur ``K_p``, once through the
-identity (no blur). The blur is significant when the blur model fits the
-data better than the identity by more than noise alone would allow, and when
-the blur it describes moves the image by a good part of a pixel.
+identity (no blur). The blur is significant when the blur model explains
+the data better than the identity (misfit plus edge count) by more than noise
+alone would allow and by a clear fraction, and when the blur it describes
+moves the image by a good part of a pixel (docs/blind.md, "What makes it
+robust").
 """
 
 from __future__ import annotations
@@ -110,18 +112,25 @@ def _objective(op, g, lam, p: BlindParams):
     return float((r * r).sum()) / n, edges / n
 
 
-def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device, lam=None):
+def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device):
     """Evidence for the blur of path ``cp`` in the grayscale (V, U, Y, X, 1) ``g`` (``d_inf = 0`` model).
 
+    ``E = |K l - g|^2 / N + lam * edges / N`` of the salient-edge latent
+    (``lam`` the smallest weight of the alternation) is computed with
+    ``K = K_p`` (``E_blur``) and with ``K = I`` (``E_none``). The blur is
+    found when ``E_none - E_blur > EVIDENCE_MARGIN sigma^2`` (``sigma``:
+    :func:`noise_sigma`), ``(E_none - E_blur) / E_none > RELATIVE_MARGIN``
+    and :func:`blur_reach` ``>= MIN_REACH``.
+
     A generator (yields the latents' conjugate-gradient iterates, where the
-    caller may report or stop); returns a dict: ``sigma`` (noise),
+    caller may report or stop); returns a dict of floats: ``sigma``,
     ``misfit_blur``, ``misfit_none`` (mean squared residuals),
-    ``gain`` (``(misfit_none - misfit_blur) / sigma^2``, in noise variances
-    per sample), ``reach`` (px, :func:`blur_reach`) and ``blur_found``:
-    ``gain > EVIDENCE_MARGIN and reach >= MIN_REACH``.
+    ``edges_blur``, ``edges_none`` (edges per sample), ``gain``
+    (``(E_none - E_blur) / sigma^2``), ``relative``, ``reach`` (px), and
+    ``blur_found`` (bool).
     """
     sigma = max(noise_sigma(g), 1e-4)
-    lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor) if lam is None else lam
+    lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
     op = BlurOperator(tuple(g.shape), cp, n_times=p.n_times, infinity_disparity=0.0, device=device)
     m_blur, e_blur = yield from _objective(op, g, lam, p)
     m_none, e_none = yield from _objective(Identity(), g, lam, p)

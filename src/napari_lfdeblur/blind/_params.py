@@ -351,7 +351,12 @@ class BlindResult:
     timings : dict
         Seconds spent per stage (``'path'``, ``'final'``, ``'total'``).
     info : dict
-        Extra details (device used, restart scores, levels, ...).
+        Extra details (device used, restart scores, levels, ...), and the
+        verdict of the evidence test (docs/blind.md, "What makes it
+        robust"): ``'blur_found'`` (bool), ``'evidence'`` (dict of its
+        numbers), ``'message'`` (one line for people) and, when no
+        significant blur was found, ``'rejected_path'`` (the path estimated;
+        ``control_points`` is then zero and ``lightfield`` the input).
     """
 
     lightfield: np.ndarray
