@@ -154,6 +154,11 @@ def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent):
     assert psnr(res.lightfield, sharp) >= psnr(blurred, sharp) - 0.1
     assert res.info["blur_found"] is False and res.info["message"].startswith("little blur found")
     assert not np.any(res.control_points) and res.info["evidence"]["relative"] < 0.06
+    if extent:  # require_evidence=False restores with the path estimated, whatever the evidence
+        forced = blind_deblur(blurred, params=BlindParams().replace(n_control_points=2, require_evidence=False, **FAST),
+                              device="cpu")
+        assert "restored anyway" in forced.info["message"]
+        np.testing.assert_array_equal(forced.control_points, res.info["rejected_path"])
 
 
 def test_blind_deblurring_lowers_the_error_with_a_nonzero_infinity_disparity():

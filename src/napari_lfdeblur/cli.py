@@ -148,6 +148,9 @@ def _add_deblur(sub):
     p.add_argument("--edge-anisotropy", type=float, metavar="PX",
                    help="how much softer the camera's views are along x than along y, px "
                         "(BlindParams.latent.edge_anisotropy; default: the preset's, 0)")
+    p.add_argument("--restore-anyway", action="store_true",
+                   help="restore with the estimated path even when the data give little evidence of blur "
+                        "(BlindParams.require_evidence=False; default: return the input unchanged then)")
     p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
 
@@ -171,6 +174,8 @@ def _run_deblur(args):
         params = BlindParams.preset(args.preset)
     if args.edge_anisotropy is not None:
         params = params.replace(latent={"edge_anisotropy": args.edge_anisotropy})
+    if args.restore_anyway:
+        params = params.replace(require_evidence=False)
     lf, _ = _read(args)
     gen = iter_blind_deblur(lf, infinity_disparity=args.infinity_disparity, params=params,
                             device=args.device, seed=args.seed)

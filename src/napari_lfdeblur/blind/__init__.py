@@ -357,9 +357,11 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     info = {"device": str(dev), "box": box, **est.info}
     info["levels"] = [(crop.shape[2] // k, crop.shape[3] // k) for k in est.factors]
     evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev)
-    info.update(blur_found=evidence["blur_found"], evidence=evidence, message=evidence_message(evidence))
+    info.update(blur_found=evidence["blur_found"], evidence=evidence,
+                message=evidence_message(evidence, p.require_evidence))
+    restore = evidence["blur_found"] or not p.require_evidence
     cp = est.control_points
-    if not evidence["blur_found"]:  # the path estimated, kept for inspection; the result has no blur
+    if not restore:  # the path estimated, kept for inspection; the result has no blur
         info["rejected_path"] = canonical_time_direction(center_path(cp, p.n_times))
         cp = np.zeros_like(cp)
     if crop is not arr:
@@ -370,7 +372,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
     del g, f
-    if p.final is not None and evidence["blur_found"]:
+    if p.final is not None and restore:
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()

@@ -83,8 +83,12 @@ def blur_reach(cp, n_times: int, g: torch.Tensor) -> float:
     return extent * float(np.percentile(d[textured], 95))
 
 
-def evidence_message(evidence: dict) -> str:
-    """A one-line description of the evidence for the blur, for people."""
+def evidence_message(evidence: dict, required: bool = True) -> str:
+    """A one-line description of the evidence for the blur, for people.
+
+    ``required``: whether the result depends on it (else the light field was
+    restored with the path whatever the evidence).
+    """
     e = evidence
     if e["blur_found"]:
         return (f"blur found: the blur model explains {e['gain']:.2f} noise variances per sample more than no "
@@ -95,7 +99,8 @@ def evidence_message(evidence: dict) -> str:
                    f"(needs > {EVIDENCE_MARGIN:g})")
     if not e["reach"] >= MIN_REACH:
         why.append(f"it moves the image by {e['reach']:.2f} px at most (needs >= {MIN_REACH:g})")
-    return "little blur found, the input is returned unchanged: " + "; ".join(why)
+    verdict = "the input is returned unchanged" if required else "restored anyway (require_evidence=False)"
+    return f"little blur found, {verdict}: " + "; ".join(why)
 
 
 def _objective(op, g, lam, p: BlindParams):
