@@ -22,7 +22,10 @@ optional ``true_path`` layer. While it runs:
 Cancel stops the solver at its next progress report, removes the preview
 layers and adds nothing. When it finishes, the previews are replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
-timings, package version) and ``'<source> estimated path'``.
+timings, package version, and the verdict of the evidence test in
+``blur_evidence``) and ``'<source> estimated path'``. When the data show
+little blur, the result is the input with a zero path, and a notification
+says why (:attr:`napari_lfdeblur.blind.BlindResult.info`).
 """
 
 from __future__ import annotations
