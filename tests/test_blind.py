@@ -18,6 +18,7 @@ from napari_lfdeblur.blind import (
     PathFitParams,
     _alternating,
     _disparity,
+    _evidence,
     _latent,
     _memory,
     _path_fit,
@@ -30,7 +31,7 @@ from napari_lfdeblur.path import bezier_positions, center_path, linear_path
 from napari_lfdeblur.priors import gradient_yx, sparse_gradient_prior
 from napari_lfdeblur.progress import run_to_completion, with_previews
 
-from napari_lfdeblur.metrics import chamfer_distance
+from napari_lfdeblur.metrics import chamfer_distance, psnr
 
 # small and fast: the test cases use few iterations
 FAST = dict(path=dict(n_outer=2, steps=100, n_restarts=3), final={"n_iter": 15}, final_n_times=6)
@@ -135,6 +136,60 @@ def test_result_gauge_and_range(linear_case, linear_result):
     assert set(res.timings) >= {"path", "final", "total"}
 
 
+def test_clear_blur_is_found_with_its_evidence(linear_result):
+    info = linear_result.info
+    assert info["blur_found"] is True and "blur found" in info["message"]
+    ev = info["evidence"]
+    assert ev["gain"] > _evidence.EVIDENCE_MARGIN and ev["relative"] > _evidence.RELATIVE_MARGIN
+    assert ev["reach"] > 1.0 and "rejected_path" not in info
+
+
+@pytest.mark.parametrize("extent", [0.0, 0.15])
+def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent):
+    sharp = _scene()
+    rng = np.random.default_rng(1)
+    blurred = simulate_blur(sharp, linear_path(extent, 30.0), n_times=32) if extent else sharp
+    blurred = np.clip(blurred + rng.normal(0, 0.002, sharp.shape), 0, 1).astype(np.float32)
+    res = blind_deblur(blurred, params=BlindParams().replace(n_control_points=2, **FAST), device="cpu")
+    assert psnr(res.lightfield, sharp) >= psnr(blurred, sharp) - 0.1
+    assert res.info["blur_found"] is False and res.info["message"].startswith("little blur found")
+    assert not np.any(res.control_points) and res.info["evidence"]["relative"] < 0.06
+    if extent:  # require_evidence=False restores with the path estimated, whatever the evidence
+        forced = blind_deblur(blurred, params=BlindParams().replace(n_control_points=2, require_evidence=False, **FAST),
+                              device="cpu")
+        assert "restored anyway" in forced.info["message"]
+        np.testing.assert_array_equal(forced.control_points, res.info["rejected_path"])
+
+
+def test_blind_deblurring_lowers_the_error_with_a_nonzero_infinity_disparity():
+    d_inf = 1.0  # every disparity of the scene on one side of d_inf: (2.0, 0.5) relative to it
+    sharp = _scene(disparities=(2.0 + d_inf, 0.5 + d_inf))
+    rng = np.random.default_rng(1)
+    blurred = simulate_blur(sharp, linear_path(2.0, 30.0), n_times=32, infinity_disparity=d_inf)
+    blurred = np.clip(blurred + rng.normal(0, 0.002, sharp.shape), 0, 1).astype(np.float32)
+    res = blind_deblur(blurred, infinity_disparity=d_inf, params=BlindParams().replace(n_control_points=2, **FAST),
+                       device="cpu")
+    assert res.info["blur_found"] is True
+    assert psnr(res.lightfield, sharp) > psnr(blurred, sharp) + 2.0  # measured: +4.7 dB
+
+
+def test_noise_sigma_is_robust_to_edges():
+    rng = np.random.default_rng(0)
+    flat = np.zeros((3, 3, 64, 64, 1), np.float32)
+    flat[:, :, :, 32:] = 0.8  # a strong edge
+    for sigma in (0.002, 0.01):
+        g = torch.as_tensor(flat + rng.normal(0, sigma, flat.shape).astype(np.float32))
+        assert _evidence.noise_sigma(g) == pytest.approx(sigma, rel=0.1)
+
+
+def test_blur_reach_is_extent_times_disparity():
+    lf = _two_disparity_halves(32, 32, 1, -2, seed=0, smooth=1.0)
+    cp = linear_path(1.0)
+    reach = _evidence.blur_reach(cp, 32, torch.as_tensor(lf))
+    assert reach == pytest.approx(2.0, abs=0.2)  # 1 view x the larger |d|, 2 px/view
+    assert _evidence.blur_reach(0.01 * cp, 32, torch.as_tensor(lf)) < _evidence.MIN_REACH
+
+
 def test_same_seed_same_result():
     lf = _scene((5, 5, 24, 24), seed=3)
     blurred = simulate_blur(lf, linear_path(1.5, 60.0), n_times=16)
@@ -220,7 +275,12 @@ def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatc
         last = count["n"]
         records.append(rec)
     total = count["n"]
-    assert all(r.stage.startswith("path") for r in records)
+    # the path stage, then the evidence for its blur (at the start of the final stage)
+    n_path = sum(r.stage.startswith("path") for r in records)
+    assert all(r.stage.startswith("path") for r in records[:n_path])
+    assert all(r.stage == "evidence" and r.fraction == pytest.approx(2 / 3) for r in records[n_path:])
+    assert max(work) <= 3  # also in the evidence stage
+    records = records[:n_path]
     # the work is split finely: many records, none after more than a small part of it
     assert len(records) >= 10
     assert {r.info["phase"] for r in records} == {"latent", "path fit", "done"}
@@ -241,7 +301,7 @@ def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatc
     # every-th record, of the input's shape, in [0, 1]
     assert all(r.estimate is not None for r in records)
     with_preview = [i for i, r in enumerate(records, 1) if r.preview is not None]
-    assert with_preview == list(range(every, len(records) + 1, every))
+    assert with_preview == list(range(every, n_path + 1, every))
     for i in with_preview:
         prev = records[i - 1].preview
         assert prev.shape == blurred.shape and prev.dtype == np.float32
@@ -400,6 +460,25 @@ def test_bad_input_gives_clear_errors():
         LatentParams(edge_sigma_from=0)
     with pytest.raises(ValueError, match="disparity_weight"):
         PathFitParams(disparity_weight=-1.0)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf"), 4.5, -4.01])
+def test_infinity_disparity_must_be_finite_and_within_the_views(bad):
+    good = np.zeros((5, 5, 16, 16), np.float32)  # bound: |d_inf| * 2 <= 16 / 2
+    with pytest.raises(ValueError, match="infinity_disparity"):
+        blind_deblur(good, infinity_disparity=bad)
+    with pytest.raises(ValueError, match="infinity_disparity"):
+        iter_blind_deblur(good, infinity_disparity=bad)  # checked when the generator is created
+
+
+def test_infinity_disparity_of_the_wrong_type_or_auto():
+    good = np.zeros((5, 5, 16, 16), np.float32)
+    for bad in ("1.0", None, True, [1.0]):
+        with pytest.raises(TypeError, match="infinity_disparity"):
+            iter_blind_deblur(good, infinity_disparity=bad)
+    with pytest.raises(ValueError, match="'auto' is not available.*farthest"):
+        iter_blind_deblur(good, infinity_disparity="auto")
+    assert blind.check_infinity_disparity(-4.0, good.shape) == -4.0  # the bound itself is allowed
 
 
 # ------------------------------------------------------------ pieces
@@ -662,6 +741,7 @@ def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys, monkeypatch):
     out = tmp_path / "sharp.npz"
     assert main(["deblur", str(src), str(out), "--params", str(params), "--device", "cpu"]) == 0
     assert out.exists()
+    assert "blur found" in capsys.readouterr().out  # the verdict of the evidence test is printed
     cp = load_path_json(tmp_path / "sharp_path.json")
     assert cp.shape[1] == 3
     # existing output without --overwrite: a one-line error, status 2

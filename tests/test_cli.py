@@ -98,3 +98,18 @@ def test_transposed_views_are_named_and_swapped_on_request(tmp_path, capsys):
     assert main(["simulate", "--swap-views", str(tmp_path / "transposed.npy"), str(out),
                  "--path", "linear:2", "--n-times", "8"]) == 0
     np.testing.assert_allclose(read_lightfield(out), simulate_blur(lf, linear_path(2.0), n_times=8), atol=1e-6)
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "100"])
+def test_deblur_refuses_a_bad_infinity_disparity_in_one_line(lf_file, tmp_path, capsys, value):
+    _, src = lf_file
+    out = tmp_path / "o.npz"
+    assert main(["deblur", str(src), str(out), "--infinity-disparity", value, "--device", "cpu"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "infinity_disparity" in err and not out.exists()
+
+
+def test_deblur_help_says_where_infinity_disparity_comes_from(capsys):
+    with pytest.raises(SystemExit):
+        main(["deblur", "--help"])
+    assert "farthest" in " ".join(capsys.readouterr().out.split())

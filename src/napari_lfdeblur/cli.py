@@ -139,11 +139,18 @@ def _add_deblur(sub):
     p.add_argument("--params", help="a JSON file of BlindParams, nested by stage as BlindParams.to_json writes "
                    "it; keys left out take their defaults (overrides --preset)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
-    p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
+    p.add_argument("--infinity-disparity", type=float, default=0.0, metavar="D_INF",
+                   help="disparity of points at infinity, px/view (default 0: a camera focused at infinity). "
+                        "With the views' zero disparity on the focal plane, it is about the disparity of the "
+                        "farthest content (sky, a far wall); the blind solver cannot estimate it (see "
+                        "docs/blind.md)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--edge-anisotropy", type=float, metavar="PX",
                    help="how much softer the camera's views are along x than along y, px "
                         "(BlindParams.latent.edge_anisotropy; default: the preset's, 0)")
+    p.add_argument("--restore-anyway", action="store_true",
+                   help="restore with the estimated path even when the data give little evidence of blur "
+                        "(BlindParams.require_evidence=False; default: return the input unchanged then)")
     p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
 
@@ -167,6 +174,8 @@ def _run_deblur(args):
         params = BlindParams.preset(args.preset)
     if args.edge_anisotropy is not None:
         params = params.replace(latent={"edge_anisotropy": args.edge_anisotropy})
+    if args.restore_anyway:
+        params = params.replace(require_evidence=False)
     lf, _ = _read(args)
     gen = iter_blind_deblur(lf, infinity_disparity=args.infinity_disparity, params=params,
                             device=args.device, seed=args.seed)
@@ -186,6 +195,8 @@ def _run_deblur(args):
     save_path_json(path_file, result.control_points, overwrite=True, n_times=params.n_times,
                    infinity_disparity=args.infinity_disparity, preset=args.preset if not args.params else None,
                    timings=result.timings)
+    if "message" in result.info:
+        print(result.info["message"])
     print(f"wrote {out} {result.lightfield.shape} and its path {path_file} "
           f"({result.timings.get('total', float('nan')):.1f} s)")
 

@@ -55,7 +55,13 @@ Two algorithms, chosen by :attr:`BlindParams.method`:
     with the 4D sparse-gradient prior ``R_eps = mean(min(|grad l|^2 / eps^2, 1))``
     and ``w``, ``eps`` annealed.
 
-The path found, every colour channel is restored by the non-blind
+The path found, the data decide whether its blur is significant: the
+salient-edge objective with the path's blur must beat the one with no blur
+(the identity) by more than the noise floor and by a clear fraction, and the
+blur must move the image by a good part of a pixel. If not, the result is
+the input itself with a zero path, and ``info['blur_found']`` is False
+(docs/blind.md, "What makes it robust"). If so, every colour channel is
+restored by the non-blind
 :func:`~napari_lfdeblur.deconvolution.deconvolve` with ``params.final``
 (4D TV in both presets), tile by tile when memory is short. Both methods
 return the path time-canonicalised
@@ -84,14 +90,23 @@ import numpy as np
 import torch
 
 from .. import devices
+from .._lightfield import check_number
 from ..blur import validate_lightfield
 from ..path import bezier_positions, canonical_time_direction, center_path
 from ..progress import Progress, run_to_completion
 from ._alternating import iter_alternating, relay
 from ._disparity import gray, shear
+from ._evidence import blur_evidence, evidence_message
 from ._joint import iter_joint
 from ._memory import TILE_MARGIN, estimate_blind_memory, plan_tiles, tiles
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams
+
+#: why ``infinity_disparity='auto'`` is refused (docs/blind.md, "Where d_inf comes from")
+AUTO_MESSAGE = (
+    "infinity_disparity='auto' is not available: d_inf cannot be estimated from a blurred light field alone "
+    "(not at all on a single plane, where a longer path at another d_inf blurs it the same). Pass the disparity "
+    "of the farthest scene content (the sky, a far wall) in px/view, or the value your decoder states; "
+    "see docs/blind.md")
 
 __all__ = [
     "BlindParams",
@@ -103,6 +118,8 @@ __all__ = [
     "blind_deblur",
     "iter_blind_deblur",
     "estimate_blind_memory",
+    "check_infinity_disparity",
+    "AUTO_MESSAGE",
 ]
 
 
@@ -126,7 +143,12 @@ def blind_deblur(
         Parameters, a dict of them (nested fields as sub-dicts), or a preset
         name (``'default'``, ``'paper'``). Default: the ``default`` preset.
     infinity_disparity : float, default 0.0
-        ``d_inf`` in px/view of the blur model.
+        ``d_inf`` in px/view of the blur model: the disparity of points at
+        infinity (0 for a camera focused at infinity; with zero disparity
+        on the focal plane, about the disparity of the farthest content).
+        Finite, with ``|d_inf| (max(V, U) - 1) / 2 <= min(Y, X) / 2``
+        (:func:`check_infinity_disparity`). ``'auto'`` is refused: it cannot
+        be estimated from the blurred light field (docs/blind.md).
     device : {'auto', 'cpu', 'cuda'}, default 'auto'
         Falls back to the CPU, with a warning, when the GPU lacks the memory.
     seed : int, default 0
@@ -142,12 +164,15 @@ def blind_deblur(
     -------
     BlindResult
         ``.lightfield`` (input shape, float32), ``.control_points`` ((n, 3),
-        zero-mean gauge), ``.loss_history``, ``.params``, ``.timings``.
+        zero-mean gauge), ``.loss_history``, ``.params``, ``.timings``,
+        ``.info`` (with ``'blur_found'``, ``'evidence'``, ``'message'``).
 
     Raises
     ------
     ValueError
-        On a malformed light field (wrong ndim, NaN) or invalid parameter values.
+        On a malformed light field (wrong ndim, NaN), invalid parameter values
+        or an ``infinity_disparity`` that is not finite, beyond the views or
+        ``'auto'``.
     TypeError
         On an unknown keyword or parameter of the wrong type.
     """
@@ -187,7 +212,10 @@ def iter_blind_deblur(
         its end); ``loss`` is the path fit at the end of an alternation
         (``info['phase'] == 'done'``) and NaN on the records inside one
         (``info['phase']`` ``'latent'`` or ``'path fit'``, with the current
-        best fit in ``info['fit']``).
+        best fit in ``info['fit']``). Then records of stage ``'evidence'``
+        (one per conjugate-gradient iteration of the evidence test, at the
+        start of the final stage's share) and, when blur is found, of the
+        final stage.
 
     Returns
     -------
@@ -219,13 +247,38 @@ def _validate_input(blurred, infinity_disparity):
         raise ValueError(f"blind deblurring needs at least 2 x 2 views; got {V} x {U}")
     if Y < 4 or X < 4:
         raise ValueError(f"blind deblurring needs views of at least 4 x 4 pixels; got {Y} x {X}")
-    if isinstance(infinity_disparity, bool) or not isinstance(infinity_disparity, (int, float, np.integer,
-                                                                                   np.floating)):
-        raise TypeError(f"infinity_disparity must be a number; got {infinity_disparity!r}")
-    d_inf = float(infinity_disparity)
-    if not math.isfinite(d_inf):
-        raise ValueError("infinity_disparity must be finite")
+    d_inf = check_infinity_disparity(infinity_disparity, arr.shape)
     return arr, d_inf
+
+
+def check_infinity_disparity(infinity_disparity, shape) -> float:
+    """``infinity_disparity`` as a float, checked against the light field's ``shape`` (V, U, Y, X[, C]).
+
+    The bound: ``|d_inf| * (max(V, U) - 1) / 2`` (the refocus of the
+    outermost view, whose offset from the centre is ``(max(V, U) - 1) / 2``
+    views) must not exceed half the smaller spatial size, ``min(Y, X) / 2``:
+    beyond it, more than half of the outermost views' samples fall outside
+    the view and are clamped to its border, and the model no longer sees the
+    scene there.
+
+    Raises
+    ------
+    TypeError
+        If it is not a real number (``'auto'`` gets a ValueError).
+    ValueError
+        If it is ``'auto'``, not finite or beyond the bound.
+    """
+    if isinstance(infinity_disparity, str) and infinity_disparity.strip().lower() == "auto":
+        raise ValueError(AUTO_MESSAGE)
+    d_inf = check_number(infinity_disparity, "infinity_disparity")
+    V, U, Y, X = shape[:4]
+    half = (max(V, U) - 1) / 2.0
+    if abs(d_inf) * half > min(Y, X) / 2.0:
+        raise ValueError(
+            f"infinity_disparity = {d_inf:g} px/view is beyond what {Y} x {X} views allow: the outermost view "
+            f"would be shifted by {abs(d_inf) * half:g} px, more than half the view; |infinity_disparity| must "
+            f"be at most {min(Y, X) / (2.0 * half):g}")
+    return d_inf
 
 
 def _make_params(params, overrides) -> BlindParams:
@@ -303,7 +356,14 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
         est = yield from iter_joint(g, d_inf, p, dev, rng, box, preview)
     info = {"device": str(dev), "box": box, **est.info}
     info["levels"] = [(crop.shape[2] // k, crop.shape[3] // k) for k in est.factors]
+    evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev)
+    info.update(blur_found=evidence["blur_found"], evidence=evidence,
+                message=evidence_message(evidence, p.require_evidence))
+    restore = evidence["blur_found"] or not p.require_evidence
     cp = est.control_points
+    if not restore:  # the path estimated, kept for inspection; the result has no blur
+        info["rejected_path"] = canonical_time_direction(center_path(cp, p.n_times))
+        cp = np.zeros_like(cp)
     if crop is not arr:
         # p_z in the crop's normalised coordinates -> the full frame's (x~ scales by r_crop / r_full)
         cp = np.array(cp, dtype=np.float64)
@@ -312,13 +372,29 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
     del g, f
-    if p.final is not None:
+    if p.final is not None and restore:
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()
     t2 = time.perf_counter()
     return BlindResult(lightfield=np.asarray(out, dtype=np.float32), control_points=cp, loss_history=est.loss_history,
                        params=p, timings={"path": t1 - t0, "final": t2 - t1, "total": t2 - t0}, info=info)
+
+
+def _iter_evidence(g, est, p: BlindParams, dev):
+    """Is the estimated blur significant? :func:`~napari_lfdeblur.blind._evidence.blur_evidence`, with progress.
+
+    ``g`` is the grayscale light field of the path stage in the ``d_inf = 0``
+    model (refocused by ``d_inf``), ``est`` the path stage's
+    :class:`~napari_lfdeblur.blind._params.PathEstimate`.
+    """
+    cp = center_path(est.control_points, p.n_times)
+
+    def report(_):  # placed at the start of the final stage: the fraction done stays monotone
+        return Progress(stage="evidence", iteration=0, n_iterations=1, loss=float("nan"),
+                        control_points=cp, stage_index=est.n_stages, n_stages=est.n_stages + 1)
+
+    return (yield from relay(blur_evidence(g, cp, p, dev), report))
 
 
 def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):

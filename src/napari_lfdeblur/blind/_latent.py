@@ -19,7 +19,7 @@ from ..blur import BlurOperator
 from ..priors import divergence4d, divergence_yx, gradient4d, gradient_yx
 from ._params import LatentParams
 
-__all__ = ["cg", "n_hqs_steps", "l0_latent", "edge_sigmas", "gauss_yx", "EdgeBlurred"]
+__all__ = ["cg", "n_hqs_steps", "difference_pair", "l0_latent", "edge_sigmas", "gauss_yx", "EdgeBlurred"]
 
 
 def cg(apply_A, b, x0, n_iter):
@@ -56,7 +56,7 @@ def n_hqs_steps(lam: float, p: LatentParams) -> int:
     return n
 
 
-def _difference_pair(angular_weight: float):
+def difference_pair(angular_weight: float):
     """``(grad, div)`` of the latent's regulariser: 4D with weighted angular axes, or spatial only."""
     a = angular_weight
     if a > 0:
@@ -84,7 +84,7 @@ def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0
     .. [2] J. Pan, Z. Hu, Z. Su and M.-H. Yang, "Deblurring Text Images via
            L0-Regularized Intensity and Gradient Prior", CVPR 2014.
     """
-    grad, div = _difference_pair(p.angular_weight)
+    grad, div = difference_pair(p.angular_weight)
     Ktf = op.adjoint(f)
     x = x0
     beta = 2.0 * lam

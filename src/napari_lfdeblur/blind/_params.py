@@ -279,6 +279,11 @@ class BlindParams(JsonParams):
         The final non-blind solve of every colour channel with the path
         found (see :func:`~napari_lfdeblur.deconvolution.deconvolve`); None
         skips it and returns the blurred input as the light field.
+    require_evidence : bool
+        Restore only when the data give evidence of a significant blur
+        (docs/blind.md, "What makes it robust"); otherwise return the input
+        with a zero path. False: always restore with the path estimated
+        (the evidence is still reported in ``BlindResult.info``).
     """
 
     method: str = "alternating"
@@ -290,6 +295,7 @@ class BlindParams(JsonParams):
     path: PathFitParams = field(default_factory=PathFitParams)
     joint: JointParams = field(default_factory=JointParams)
     final: DeconvolutionParams | None = field(default_factory=_default_final)
+    require_evidence: bool = True
 
     _what = "blind"
 
@@ -299,7 +305,7 @@ class BlindParams(JsonParams):
         if self.method not in METHODS:
             raise ValueError(f"unknown blind method {self.method!r}: choose one of {', '.join(METHODS)}")
         _check(self, "BlindParams", ints={"n_control_points": 2, "n_times": 2, "final_n_times": 2},
-               nonneg=("max_extent",))
+               nonneg=("max_extent",), bools=("require_evidence",))
         for name, cls in _NESTED.items():
             if not isinstance(getattr(self, name), cls):
                 raise TypeError(f"BlindParams.{name} must be a {cls.__name__} (or, in replace() and from_dict(), "
@@ -351,7 +357,12 @@ class BlindResult:
     timings : dict
         Seconds spent per stage (``'path'``, ``'final'``, ``'total'``).
     info : dict
-        Extra details (device used, restart scores, levels, ...).
+        Extra details (device used, restart scores, levels, ...), and the
+        verdict of the evidence test (docs/blind.md, "What makes it
+        robust"): ``'blur_found'`` (bool), ``'evidence'`` (dict of its
+        numbers), ``'message'`` (one line for people) and, when no
+        significant blur was found, ``'rejected_path'`` (the path estimated;
+        ``control_points`` is then zero and ``lightfield`` the input).
     """
 
     lightfield: np.ndarray

@@ -22,7 +22,10 @@ optional ``true_path`` layer. While it runs:
 Cancel stops the solver at its next progress report, removes the preview
 layers and adds nothing. When it finishes, the previews are replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
-timings, package version) and ``'<source> estimated path'``.
+timings, package version, and the verdict of the evidence test in
+``blur_evidence``) and ``'<source> estimated path'``. When the data show
+little blur, the result is the input with a zero path, and a notification
+says why (:attr:`napari_lfdeblur.blind.BlindResult.info`).
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from ..layers import (
     path_layer_data,
     remove_layer,
 )
-from ._controls import LayerChoice, device_choice, fspin, has_path, heading, spin
+from ._controls import LayerChoice, device_choice, fspin, has_path, heading, notify_info, spin
 from ._plots import LossPlot, PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -98,7 +101,9 @@ def _fields(viewer) -> list:
         device_choice(),
         spin("seed", 0, 0, 2**31 - 1, tooltip="random seed of the initial path"),
         fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
-              tooltip="infinity disparity d_inf, px/view"),
+              tooltip="disparity of points at infinity d_inf, px/view (0: a camera focused at infinity). "
+              "With the views' zero disparity on the focal plane, it is about the disparity of the farthest "
+              "content (sky, a far wall); it cannot be estimated from the blur (docs/blind.md)"),
         fspin("edge_anisotropy", 0.0, -2.0, 2.0, 0.05, label="views softer along x (px)",
               tooltip="how much softer the camera's views are along x than along y, px "
               "(0: the same; see docs/blind.md)"),
@@ -244,6 +249,8 @@ class BlindDeblurWidget(SolverWidget):
             loss_history=[float(v) for v in getattr(result, "loss_history", [])],
             timings=dict(getattr(result, "timings", {}) or {}),
         )
+        if "message" in (getattr(result, "info", None) or {}):
+            meta["blur_evidence"] = result.info["message"]
         out = add_layer(self.viewer, lightfield_layer_data(result.lightfield, name=name, metadata=meta))
         path = add_layer(self.viewer, path_layer_data(
             cp, job["shape"], n_times=n_times, name=f"{job['source']} estimated path",
@@ -255,3 +262,6 @@ class BlindDeblurWidget(SolverWidget):
         else:
             self.loss_plot.plot(self.loss_plot.values)
         self.epi.layer_combo.set_layer(out)
+        info = getattr(result, "info", None) or {}
+        if info.get("blur_found") is False:
+            notify_info(f"{self.title}: {info.get('message', 'little blur found')}")

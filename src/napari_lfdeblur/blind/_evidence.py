@@ -1,0 +1,149 @@
+"""Is the blur significant? The evidence for the estimated path against the "no blur" explanation.
+
+After the path estimate, the grayscale light field is explained twice by a
+salient-edge latent of the same kind (:func:`~napari_lfdeblur.blind._latent.l0_latent`,
+same weight): once through the estimated blur ``K_p``, once through the
+identity (no blur). The blur is significant when the blur model explains
+the data better than the identity (misfit plus edge count) by more than noise
+alone would allow and by a clear fraction, and when the blur it describes
+moves the image by a good part of a pixel (docs/blind.md, "What makes it
+robust").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from ..blur import BlurOperator
+from ..path import bezier_positions
+from ..priors import gradient_yx
+from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
+from ._latent import difference_pair, l0_latent
+from ._params import BlindParams
+
+__all__ = ["noise_sigma", "blur_reach", "blur_evidence", "evidence_message", "Identity", "EVIDENCE_MARGIN", "RELATIVE_MARGIN", "MIN_REACH"]
+
+#: the blur model must lower the salient-edge objective by more than this many noise variances per sample
+EVIDENCE_MARGIN = 1.0
+#: ... and by more than this fraction of the objective of the "no blur" explanation
+RELATIVE_MARGIN = 0.06
+#: a blur whose largest image motion is below this (px) counts as no blur
+MIN_REACH = 0.25
+
+
+class Identity:
+    """The "no blur" operator, with the interface of :class:`~napari_lfdeblur.blur.BlurOperator`."""
+
+    def forward(self, z):
+        return z
+
+    def adjoint(self, r):
+        return r
+
+
+@torch.no_grad()
+def noise_sigma(g: torch.Tensor) -> float:
+    """Robust estimate of the noise standard deviation of (V, U, Y, X, C).
+
+    The median absolute value of the finest diagonal Haar detail
+    ``(a - b - c + d) / 2`` of every view, scaled by 1.4826 (the MAD of a
+    Gaussian). The diagonal detail of natural images is mostly noise, and the
+    median ignores the edges that are not.
+    """
+    Y, X = g.shape[2:4]
+    a = g[:, :, 0 : Y - 1 : 2, 0 : X - 1 : 2]
+    b = g[:, :, 0 : Y - 1 : 2, 1:X:2]
+    c = g[:, :, 1:Y:2, 0 : X - 1 : 2]
+    d = g[:, :, 1:Y:2, 1:X:2]
+    hh = (a - b - c + d) / 2.0
+    return float(hh.abs().flatten().median()) * 1.4826
+
+
+def blur_reach(cp, n_times: int, g: torch.Tensor) -> float:
+    """Largest image motion (px) of the blur of path ``cp`` in ``g`` (V, U, Y, X, 1), ``d_inf = 0`` model.
+
+    A point at disparity ``d`` moves by ``(d - d_inf) s`` px when the camera
+    moves by ``s`` views (docs/model.md): the path's in-plane extent (views)
+    times the 95th percentile of ``|d|`` (``g`` is refocused by ``d_inf``)
+    over the pixels with the stronger half of the gradients, where the
+    disparity is measured (a flat region has none).
+    """
+    pos = bezier_positions(np.asarray(cp, dtype=np.float64), n_times)[:, :2]
+    extent = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
+    Y, X = g.shape[2:4]
+    k = max(1, int(math.sqrt(Y * X / DISPARITY_PIXELS)))
+    small = downsample(g, k)
+    d = np.abs(disparity_map(small))
+    gy, gx = gradient_yx(small.mean(dim=(0, 1))[None, None])
+    mag = (gy * gy + gx * gx)[0, 0, ..., 0].cpu().numpy()
+    textured = mag >= np.median(mag)
+    return extent * float(np.percentile(d[textured], 95))
+
+
+def evidence_message(evidence: dict, required: bool = True) -> str:
+    """A one-line description of the evidence for the blur, for people.
+
+    ``required``: whether the result depends on it (else the light field was
+    restored with the path whatever the evidence).
+    """
+    e = evidence
+    if e["blur_found"]:
+        return (f"blur found: the blur model explains {e['gain']:.2f} noise variances per sample more than no "
+                f"blur; it moves the image by up to {e['reach']:.2f} px")
+    why = []
+    if not e["gain"] > EVIDENCE_MARGIN:
+        why.append(f"the blur model explains {e['gain']:.2f} noise variances per sample more than no blur "
+                   f"(needs > {EVIDENCE_MARGIN:g})")
+    if not e["reach"] >= MIN_REACH:
+        why.append(f"it moves the image by {e['reach']:.2f} px at most (needs >= {MIN_REACH:g})")
+    verdict = "the input is returned unchanged" if required else "restored anyway (require_evidence=False)"
+    return f"little blur found, {verdict}: " + "; ".join(why)
+
+
+def _objective(op, g, lam, p: BlindParams):
+    """The salient-edge latent ``l`` under ``op``: ``(|K l - g|^2 / N, edges / N)``.
+
+    ``edges`` counts the pixels whose (weighted 4D) gradient the last
+    splitting step keeps, the ``||grad l||_0`` of the latent's objective.
+    """
+    latent = yield from l0_latent(op, g, lam, p.latent, g.clone())
+    r = op.forward(latent) - g
+    grad, _ = difference_pair(p.latent.angular_weight)
+    edges = float((sum(c * c for c in grad(latent)) >= lam / p.latent.hqs_beta_max).sum())
+    n = g.numel()
+    return float((r * r).sum()) / n, edges / n
+
+
+def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device):
+    """Evidence for the blur of path ``cp`` in the grayscale (V, U, Y, X, 1) ``g`` (``d_inf = 0`` model).
+
+    ``E = |K l - g|^2 / N + lam * edges / N`` of the salient-edge latent
+    (``lam`` the smallest weight of the alternation) is computed with
+    ``K = K_p`` (``E_blur``) and with ``K = I`` (``E_none``). The blur is
+    found when ``E_none - E_blur > EVIDENCE_MARGIN sigma^2`` (``sigma``:
+    :func:`noise_sigma`), ``(E_none - E_blur) / E_none > RELATIVE_MARGIN``
+    and :func:`blur_reach` ``>= MIN_REACH``.
+
+    A generator (yields the latents' conjugate-gradient iterates, where the
+    caller may report or stop); returns a dict of floats: ``sigma``,
+    ``misfit_blur``, ``misfit_none`` (mean squared residuals),
+    ``edges_blur``, ``edges_none`` (edges per sample), ``gain``
+    (``(E_none - E_blur) / sigma^2``), ``relative``, ``reach`` (px), and
+    ``blur_found`` (bool).
+    """
+    sigma = max(noise_sigma(g), 1e-4)
+    lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
+    op = BlurOperator(tuple(g.shape), cp, n_times=p.n_times, infinity_disparity=0.0, device=device)
+    m_blur, e_blur = yield from _objective(op, g, lam, p)
+    m_none, e_none = yield from _objective(Identity(), g, lam, p)
+    e0, e1 = m_none + lam * e_none, m_blur + lam * e_blur
+    gain = (e0 - e1) / sigma**2
+    relative = (e0 - e1) / max(e0, 1e-30)
+    reach = blur_reach(cp, p.n_times, g)
+    found = bool(gain > EVIDENCE_MARGIN and relative > RELATIVE_MARGIN and reach >= MIN_REACH)
+    return {"sigma": sigma, "misfit_blur": m_blur, "misfit_none": m_none, "edges_blur": e_blur,
+            "edges_none": e_none, "gain": gain, "relative": relative, "reach": reach,
+            "blur_found": found}
