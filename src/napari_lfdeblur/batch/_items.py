@@ -12,6 +12,7 @@ import math
 import os
 import socket
 import time
+import warnings
 from numbers import Real
 from pathlib import Path
 
@@ -160,11 +161,17 @@ def _deblur(lf, spec: dict, device):
 
 
 def _recover(spec: dict, out: Path) -> dict:
-    """An output that exists but is not in the manifest: keep it if it is this item's, else refuse."""
-    from ..io import read_lightfield_with_metadata
+    """An output that exists but is not in the manifest: keep it if it is this item's, else refuse.
+
+    Returns None when the file cannot be read as a light field (cut short): the item is redone.
+    """
+    from ..io import LightFieldError, read_lightfield_with_metadata
     from ..io._write import jsonable
 
-    lf, meta = read_lightfield_with_metadata(out)
+    try:
+        lf, meta = read_lightfield_with_metadata(out)
+    except (LightFieldError, OSError, ValueError):  # a partial or corrupt file: redo the item
+        return None
     saved = meta.get("saved_metadata", {}).get("batch")
     if saved != jsonable(item_metadata(spec)) or not Path(spec["path_json"]).is_file():
         raise FileExistsError(f"{out} exists and is not this item's output; pass overwrite to replace it")
@@ -177,35 +184,45 @@ def run_item(spec: dict) -> dict:
     The path JSON is written before the light field (both atomically), so an
     existing output always has its path beside it. Any exception (unreadable
     input, NaN, a solver error, out of memory) becomes ``status='failed'``
-    with its ``error``; the record never holds a light field.
+    with its ``error``, and warnings are listed in ``warnings``; the record
+    never holds a light field.
     """
+    t0 = time.perf_counter()
+    rec = {"status": "failed", "error": None, "size": None, "shape": None, "recovered": False,
+           "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _run(spec, Path(spec["output"]), rec)
+    rec["warnings"] = sorted({f"{w.category.__name__}: {w.message}"[:500] for w in caught})
+    rec["time"] = round(time.perf_counter() - t0, 4)
+    return rec
+
+
+def _run(spec: dict, out: Path, rec: dict) -> None:
+    """The body of :func:`run_item`: fills ``rec`` in place."""
     import torch
 
     from ..devices import select_device
     from ..io import read_lightfield, write_lightfield
     from ..path import save_path_json
 
-    t0 = time.perf_counter()
-    rec = {"status": "failed", "error": None, "size": None, "shape": None, "recovered": False,
-           "worker": f"{socket.gethostname()}:{os.getpid()}"}
-    out = Path(spec["output"])
     try:
         torch.set_num_threads(1)
         device = select_device(spec["device"])
         rec["device"] = str(device)
-        if out.exists() and not spec["overwrite"]:
-            rec.update(_recover(spec, out))
+        kept = _recover(spec, out) if out.exists() and not spec["overwrite"] else None
+        if kept is not None:
+            rec.update(kept)
         else:
             compute = _simulate if spec["kind"] == "simulate" else _deblur
             result, cp, extra = compute(read_lightfield(spec["input"]), spec, device)
             save_path_json(spec["path_json"], cp, overwrite=True, **extra)
             meta = {"batch": item_metadata(spec), "control_points": np.asarray(cp).tolist(),
                     "version": spec["version"]}
-            write_lightfield(out, result, overwrite=spec["overwrite"], metadata=meta, compress=False)
+            write_lightfield(out, result, overwrite=spec["overwrite"] or out.exists(), metadata=meta,
+                             compress=False)
             rec["shape"] = list(result.shape)
         rec["size"] = out.stat().st_size
         rec["status"] = "ok"
     except Exception as exc:  # every failure of one item is recorded, never raised
         rec["error"] = f"{type(exc).__name__}: {exc}"
-    rec["time"] = round(time.perf_counter() - t0, 4)
-    return rec

@@ -171,7 +171,7 @@ def _record(spec: dict, result: dict) -> dict:
 
 def _failure(exc) -> dict:
     return {"status": "failed", "error": f"{type(exc).__name__}: {exc}", "size": None, "shape": None,
-            "recovered": False, "time": None}
+            "recovered": False, "time": None, "warnings": []}
 
 
 def _collect(client, todo, resources, manifest, callback, records):
