@@ -166,8 +166,8 @@ def main(argv=None):
         "dask cluster, timed from submission to the last manifest line, the cluster already started. The "
         "plain loop reads, simulates and writes the same items in one process with one torch thread. "
         f"Load average of the machine before and after the run: up to {load:.1f} on {os.cpu_count()} cores "
-        "(above the core count, other processes shared the cores and the ratios understate what idle cores "
-        "give).", "",
+        "(above the core count, other processes shared the cores, which makes the timings and their "
+        "ratios noisy).", "",
         *rows,
     ]
     _report.write_table(path, "Batch simulation on dask.distributed", _report.command_line(__file__, argv),
