@@ -180,3 +180,17 @@ def test_a_killed_run_leaves_no_corrupt_file_and_a_rerun_completes_it(client, tm
     (out / "manifest.jsonl").write_text("\n".join(lines) + "\n")
     third = deblur_many(paths, out, params=TINY, client=client, device="cpu")
     assert third.n_skipped == 3 and third.n_ok == 1 and read_manifest(out)["k1.npz"]["recovered"] is True
+
+
+def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    (tmp_path / "in").mkdir()
+    write_lightfield(tmp_path / "in" / "c0.npz", rng.random((3, 3, 16, 16)).astype(np.float32))
+    (tmp_path / "tiny.json").write_text(TINY.to_json())
+    argv = ["batch", "deblur", str(tmp_path / "in" / "*.npz"), str(tmp_path / "out"), "--params",
+            str(tmp_path / "tiny.json"), "--scheduler", client.scheduler.address, "--device", "cpu"]
+    assert main(argv) == 0
+    assert "all 1 items" in capsys.readouterr().out
+    assert read_manifest(tmp_path / "out")["c0.npz"]["status"] == "ok"
+    assert "lfdeblur batch deblur" in (tmp_path / "out" / "README.md").read_text()
+    assert main(argv) == 0 and "1 already done" in capsys.readouterr().out

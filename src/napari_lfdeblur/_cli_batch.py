@@ -71,6 +71,18 @@ def _params(args):
     return BlindParams.from_json(Path(args.params).read_text())
 
 
+def _command(args) -> str:
+    """The command that makes the same outputs (for the dataset card): data options only."""
+    words = ["lfdeblur", "batch", args.batch_command, args.inputs, args.out_dir]
+    if args.batch_command == "simulate":
+        words += ["--n-per-input", args.n_per_input, "--path-kind", args.path_kind, "--extent", args.extent,
+                  "--noise", args.noise, "--n-times", args.n_times]
+    else:
+        words += ["--params", args.params] if args.params else ["--preset", args.preset]
+    words += ["--infinity-disparity", args.infinity_disparity, "--seed", args.seed]
+    return " ".join(shlex.quote(str(w)) for w in words)
+
+
 def _bar(total: int):
     from tqdm.auto import tqdm
 
@@ -93,7 +105,7 @@ def _run(args) -> int:
     n_inputs = len(expand_inputs(args.inputs))
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1; got {args.workers}")
-    command = "lfdeblur " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:] else None
+    command = _command(args)
     if args.batch_command == "simulate":
         total = n_inputs * args.n_per_input
         run = simulate_dataset
