@@ -62,6 +62,9 @@ _PUBLIC = {
     "ssim": "metrics",
     "path_error": "metrics",
     "angular_error": "metrics",
+    # many light fields on dask.distributed
+    "simulate_dataset": "batch",
+    "deblur_many": "batch",
     # devices
     "select_device": "devices",
     # solver progress records

@@ -12,6 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
+
 __all__ = ["main"]
 
 
@@ -326,7 +328,7 @@ def _run_deconvolve(args):
 
 # ------------------------------------------------------------------ main
 
-_COMMANDS = ["info", "simulate", "deconvolve", "deblur", "demo"]
+_COMMANDS = ["info", "simulate", "deconvolve", "deblur", "demo", "batch"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -351,14 +353,14 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     run = getattr(sys.modules[__name__], f"_run_{args.command}")
     try:
-        run(args)
+        status = run(args)
     except KeyboardInterrupt:
         print("lfdeblur: interrupted", file=sys.stderr)
         return 130
     except (CLIError, ValueError, TypeError, OSError) as exc:
         print(f"lfdeblur {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    return 0
+    return status or 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,137 @@
+"""``lfdeblur batch simulate|deblur``: many light fields on dask.distributed.
+
+Exit status: 0 when every item is done, 1 when some failed (the count is
+printed, and a line per failed item), 2 on bad usage.
+"""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+
+__all__ = ["add_batch", "run_batch"]
+
+
+def _common(p) -> None:
+    p.add_argument("inputs", metavar="IN_GLOB",
+                   help="a glob pattern of input light fields (quote it: 'scenes/*.npz'), or one file or folder")
+    p.add_argument("out_dir", metavar="OUT_DIR", help="output folder: one .npz and path JSON per item, "
+                   "manifest.jsonl, README.md")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="a dask scheduler, e.g. tcp://HOST:8786 (default: a local cluster)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
+                   help="cuda: run on workers with the resource GPU=1; auto: on them if any (default auto)")
+    p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
+    p.add_argument("--overwrite", action="store_true", help="recompute every item and replace its output")
+
+
+def _extent(text: str):
+    """``--extent``: a size in views, or ``MIN:MAX`` to draw it from."""
+    try:
+        parts = [float(t) for t in text.split(":")]
+    except ValueError:
+        raise ValueError(f"--extent {text!r}: expected a number or MIN:MAX") from None
+    if len(parts) not in (1, 2):
+        raise ValueError(f"--extent {text!r}: expected a number or MIN:MAX")
+    return parts[0] if len(parts) == 1 else tuple(parts)
+
+
+def add_batch(sub) -> None:
+    """Declare ``batch simulate`` and ``batch deblur`` on the ``lfdeblur`` subparsers ``sub``."""
+    from .batch import PATH_KINDS
+
+    batch = sub.add_parser("batch", help="many light fields on dask.distributed: simulate a dataset, deblur "
+                           "a folder (resumable)")
+    kinds = batch.add_subparsers(dest="batch_command", metavar="{simulate,deblur}")
+    kinds.required = True
+    p = kinds.add_parser("simulate", help="blur each input by random camera paths")
+    _common(p)
+    p.add_argument("--n-per-input", type=int, default=1, metavar="K", help="items per input (default 1)")
+    p.add_argument("--path-kind", default="random", choices=PATH_KINDS, help="kind of path (default random)")
+    p.add_argument("--extent", default="2", help="motion size in views, or MIN:MAX to draw it (default 2)")
+    p.add_argument("--noise", type=float, default=0.0, help="Gaussian noise standard deviation (default 0)")
+    p.add_argument("--n-times", type=int, default=32, help="exposure instants T (default 32)")
+    p = kinds.add_parser("deblur", help="deblur each input blindly")
+    _common(p)
+    p.add_argument("--preset", default="default", help="parameter preset: default or paper (default: default)")
+    p.add_argument("--params", help="a JSON file of BlindParams, nested by stage (overrides --preset)")
+
+
+def _params(args):
+    from .blind import BlindParams
+
+    if not args.params:
+        return BlindParams.preset(args.preset)
+    if not Path(args.params).is_file():
+        raise ValueError(f"parameter file {args.params} does not exist")
+    return BlindParams.from_json(Path(args.params).read_text())
+
+
+def _command(args) -> str:
+    """The command that makes the same outputs (for the dataset card): data options only."""
+    words = ["lfdeblur", "batch", args.batch_command, args.inputs, args.out_dir]
+    if args.batch_command == "simulate":
+        words += ["--n-per-input", args.n_per_input, "--path-kind", args.path_kind, "--extent", args.extent,
+                  "--noise", args.noise, "--n-times", args.n_times]
+    else:
+        words += ["--params", args.params] if args.params else ["--preset", args.preset]
+    words += ["--infinity-disparity", args.infinity_disparity, "--seed", args.seed]
+    return " ".join(shlex.quote(str(w)) for w in words)
+
+
+def _bar(total: int):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, unit="item", file=sys.stderr, dynamic_ncols=True)
+
+
+def run_batch(args) -> int:
+    """Run ``lfdeblur batch ...``; returns the exit status (0, or 1 when items failed)."""
+    from .cli import CLIError
+
+    try:
+        return _run(args)
+    except (ImportError, RuntimeError) as exc:  # dask missing, another run in OUT_DIR
+        raise CLIError(str(exc)) from None
+
+
+def _run(args) -> int:
+    from .batch import connect, deblur_many, expand_inputs, simulate_dataset
+
+    n_inputs = len(expand_inputs(args.inputs))
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be >= 1; got {args.workers}")
+    command = _command(args)
+    if args.batch_command == "simulate":
+        total = n_inputs * args.n_per_input
+        run = simulate_dataset
+        options = dict(n_per_input=args.n_per_input, path_kind=args.path_kind, extent=_extent(args.extent),
+                       noise=args.noise, n_times=args.n_times)
+    else:
+        total, run, options = n_inputs, deblur_many, dict(params=_params(args))
+    with connect(args.scheduler, workers=args.workers, device=args.device) as client:
+        print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr, flush=True)
+        bar = _bar(total)
+
+        def show(rec):
+            if rec["status"] == "failed":
+                bar.write(f"failed: {rec['input']} -> {rec['output']}: {rec['error']}", file=sys.stderr)
+            bar.update(1)
+
+        try:
+            report = run(args.inputs, args.out_dir, infinity_disparity=args.infinity_disparity, seed=args.seed,
+                         client=client, device=args.device, overwrite=args.overwrite, callback=show,
+                         command=command, **options)
+        finally:
+            bar.close()
+    done = f"{report.n_ok} done, {report.n_skipped} already done (skipped)"
+    if report.n_failed:
+        print(f"lfdeblur batch {args.batch_command}: {report.n_failed} of {total} items failed ({done}); "
+              f"see {Path(args.out_dir) / 'manifest.jsonl'}", file=sys.stderr)
+        return 1
+    print(f"all {total} items in {args.out_dir} ({done})")
+    return 0

@@ -1,0 +1,228 @@
+"""One item of a batch: its seed, its camera path, and the task a worker runs for it.
+
+A task receives a small dict (the item's *spec*: file names and parameters),
+reads its own input, computes, writes its output and returns a small record.
+Light fields never travel between the client, the scheduler and the workers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import socket
+import time
+import warnings
+from numbers import Real
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["PATH_KINDS", "item_seed", "draw_path", "simulate_item", "run_item", "item_metadata"]
+
+PATH_KINDS = ("linear", "arc", "shake", "random")
+
+
+def item_seed(seed: int, name: str, index: int) -> int:
+    """The seed of item ``index`` of the input called ``name`` in a run seeded ``seed``.
+
+    The input's name (not its folder) enters through a SHA-256 hash, so a
+    dataset made from copies of the inputs elsewhere is the same.
+
+    Parameters
+    ----------
+    seed : int
+        The run's seed, >= 0.
+    name : str
+        The input's file or folder name.
+    index : int
+        The item's index among those of its input, >= 0.
+
+    Returns
+    -------
+    int
+        A seed in ``[0, 2**32)``, from :class:`numpy.random.SeedSequence`.
+    """
+    for what, value in (("seed", seed), ("index", index)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"{what} must be an integer; got {value!r}")
+        if value < 0:
+            raise ValueError(f"{what} must be >= 0; got {value}")
+    digest = int.from_bytes(hashlib.sha256(str(name).encode("utf-8")).digest()[:8], "little")
+    return int(np.random.SeedSequence([int(seed), digest, int(index)]).generate_state(1, np.uint32)[0])
+
+
+def _extent_range(extent) -> tuple[float, float]:
+    """``(lo, hi)`` of the motion's size in views: a number, or a pair to draw from uniformly."""
+    if isinstance(extent, Real) and not isinstance(extent, bool):
+        lo = hi = float(extent)
+    elif isinstance(extent, (tuple, list)) and len(extent) == 2:
+        lo, hi = (float(e) for e in extent)
+    else:
+        raise TypeError(f"extent must be a number or a (min, max) pair; got {extent!r}")
+    if not (math.isfinite(lo) and math.isfinite(hi)) or lo < 0 or hi < lo:
+        raise ValueError(f"extent must be finite with 0 <= min <= max; got {extent!r}")
+    return lo, hi
+
+
+def draw_path(path_kind: str, extent, rng: np.random.Generator) -> np.ndarray:
+    """A random camera path of a kind: its size, direction and shape drawn from ``rng``.
+
+    Parameters
+    ----------
+    path_kind : {'linear', 'arc', 'shake', 'random'}
+        ``linear``: a straight motion at a uniform angle; ``arc``: a bowed one
+        (bend uniform in [-0.5, 0.5]); ``shake`` and ``random``: random
+        control points (5 and 4) in a box, as :func:`~napari_lfdeblur.path.shake_path`
+        and :func:`~napari_lfdeblur.path.random_path`.
+    extent : float or (float, float)
+        The motion's size in views, or a range to draw it from uniformly.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray, float64, shape (n, 3)
+    """
+    from .. import path as paths
+
+    lo, hi = _extent_range(extent)
+    length = lo if lo == hi else float(rng.uniform(lo, hi))
+    angle = float(rng.uniform(0.0, 360.0))
+    if path_kind == "linear":
+        return paths.linear_path(length=length, angle_deg=angle)
+    if path_kind == "arc":
+        return paths.arc_path(length=length, bend=float(rng.uniform(-0.5, 0.5)), angle_deg=angle)
+    if path_kind == "shake":
+        return paths.shake_path(extent=length, seed=int(rng.integers(2**31)))
+    if path_kind == "random":
+        return paths.random_path(extent=length, seed=int(rng.integers(2**31)))
+    raise ValueError(f"unknown path kind {path_kind!r}: choose one of {', '.join(PATH_KINDS)}")
+
+
+def simulate_item(lf, name: str, index: int, *, path_kind: str = "random", extent=2.0,
+                  infinity_disparity: float = 0.0, noise: float = 0.0, seed: int = 0, n_times: int = 32,
+                  device="cpu"):
+    """One simulated item, in memory: what :func:`simulate_dataset` writes for ``(name, index)``.
+
+    The path is drawn by :func:`draw_path` and the noise from
+    ``numpy.random.default_rng(item_seed(seed, name, index))``; the light
+    field is blurred by :func:`~napari_lfdeblur.blur.simulate_blur`, then
+    Gaussian noise of standard deviation ``noise`` is added and the result
+    clipped to [0, 1] (no clipping when ``noise`` is 0).
+
+    Parameters
+    ----------
+    lf : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
+        The sharp light field.
+    name, index
+        The input's name and the item's index (see :func:`item_seed`).
+
+    Returns
+    -------
+    blurred : ndarray, float32, same shape as ``lf``
+    control_points : ndarray, float64, shape (n, 3)
+    """
+    from ..blur import simulate_blur
+
+    if not (isinstance(noise, Real) and math.isfinite(noise) and noise >= 0):
+        raise ValueError(f"noise must be a finite number >= 0; got {noise!r}")
+    rng = np.random.default_rng(item_seed(seed, name, index))
+    cp = draw_path(path_kind, extent, rng)
+    blurred = simulate_blur(lf, cp, n_times=n_times, infinity_disparity=infinity_disparity, device=device)
+    if noise > 0:
+        blurred = np.clip(blurred + rng.normal(0.0, noise, blurred.shape).astype(np.float32), 0.0, 1.0)
+    return blurred, cp
+
+
+def item_metadata(spec: dict) -> dict:
+    """What identifies an item's output: stored in the file and compared when resuming."""
+    return {"kind": spec["kind"], "name": spec["name"], "index": spec["index"], "seed": spec["seed"],
+            "parameters": spec["parameters"]}
+
+
+def _simulate(lf, spec: dict, device):
+    p = spec["parameters"]
+    blurred, cp = simulate_item(lf, spec["name"], spec["index"], path_kind=p["path_kind"], extent=p["extent"],
+                                infinity_disparity=p["infinity_disparity"], noise=p["noise"], seed=spec["seed"],
+                                n_times=p["n_times"], device=device)
+    return blurred, cp, {"n_times": p["n_times"], "infinity_disparity": p["infinity_disparity"]}
+
+
+def _deblur(lf, spec: dict, device):
+    from ..blind import BlindParams, blind_deblur
+
+    p = spec["parameters"]
+    params = BlindParams.from_dict(p["params"])
+    result = blind_deblur(lf, params=params, infinity_disparity=p["infinity_disparity"], device=device,
+                          seed=spec["item_seed"])
+    extra = {"n_times": params.n_times, "infinity_disparity": p["infinity_disparity"],
+             "timings": result.timings}
+    return result.lightfield, result.control_points, extra
+
+
+def _recover(spec: dict, out: Path) -> dict:
+    """An output that exists but is not in the manifest: keep it if it is this item's, else refuse.
+
+    Returns None when the file cannot be read as a light field (cut short): the item is redone.
+    """
+    from ..io import LightFieldError, read_lightfield_with_metadata
+    from ..io._write import jsonable
+
+    try:
+        lf, meta = read_lightfield_with_metadata(out)
+    except (LightFieldError, OSError, ValueError):  # a partial or corrupt file: redo the item
+        return None
+    saved = meta.get("saved_metadata", {}).get("batch")
+    if saved != jsonable(item_metadata(spec)) or not Path(spec["path_json"]).is_file():
+        raise FileExistsError(f"{out} exists and is not this item's output; pass overwrite to replace it")
+    return {"shape": list(lf.shape), "recovered": True}
+
+
+def run_item(spec: dict) -> dict:
+    """The task of one item, run on a worker: read, compute, write atomically, return a small record.
+
+    The path JSON is written before the light field (both atomically), so an
+    existing output always has its path beside it. Any exception (unreadable
+    input, NaN, a solver error, out of memory) becomes ``status='failed'``
+    with its ``error``, and warnings are listed in ``warnings``; the record
+    never holds a light field.
+    """
+    t0 = time.perf_counter()
+    rec = {"status": "failed", "error": None, "size": None, "shape": None, "recovered": False,
+           "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _run(spec, Path(spec["output"]), rec)
+    rec["warnings"] = sorted({f"{w.category.__name__}: {w.message}"[:500] for w in caught})
+    rec["time"] = round(time.perf_counter() - t0, 4)
+    return rec
+
+
+def _run(spec: dict, out: Path, rec: dict) -> None:
+    """The body of :func:`run_item`: fills ``rec`` in place."""
+    import torch
+
+    from ..devices import select_device
+    from ..io import read_lightfield, write_lightfield
+    from ..path import save_path_json
+
+    try:
+        torch.set_num_threads(1)
+        device = select_device(spec["device"])
+        rec["device"] = str(device)
+        kept = _recover(spec, out) if out.exists() and not spec["overwrite"] else None
+        if kept is not None:
+            rec.update(kept)
+        else:
+            compute = _simulate if spec["kind"] == "simulate" else _deblur
+            result, cp, extra = compute(read_lightfield(spec["input"]), spec, device)
+            save_path_json(spec["path_json"], cp, overwrite=True, **extra)
+            meta = {"batch": item_metadata(spec), "control_points": np.asarray(cp).tolist(),
+                    "version": spec["version"]}
+            write_lightfield(out, result, overwrite=spec["overwrite"] or out.exists(), metadata=meta,
+                             compress=False)
+            rec["shape"] = list(result.shape)
+        rec["size"] = out.stat().st_size
+        rec["status"] = "ok"
+    except Exception as exc:  # every failure of one item is recorded, never raised
+        rec["error"] = f"{type(exc).__name__}: {exc}"

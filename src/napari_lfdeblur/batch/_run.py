@@ -1,0 +1,259 @@
+"""The client side of a batch: the cluster, the plan (what to skip), the submission loop."""
+
+from __future__ import annotations
+
+import datetime
+import glob
+import json
+import os
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ._items import item_metadata, item_seed, run_item
+from ._manifest import append_record, check_card, open_manifest, read_manifest, write_card
+
+__all__ = ["BatchReport", "connect", "expand_inputs", "gpu_workers", "run_batch"]
+
+_INSTALL = 'the batch API needs dask.distributed: pip install "napari-lfdeblur[batch]"'
+
+
+@dataclass
+class BatchReport:
+    """What a batch run did.
+
+    Attributes
+    ----------
+    out_dir : Path
+        The output folder (holds ``manifest.jsonl`` and ``README.md``).
+    records : list of dict
+        The manifest record of every item of this run, in input order; skipped
+        items carry their earlier record with ``status='skipped'``.
+    """
+
+    out_dir: Path
+    records: list = field(default_factory=list)
+
+    def count(self, status: str) -> int:
+        """How many items ended with ``status`` (``'ok'``, ``'failed'`` or ``'skipped'``)."""
+        return sum(r["status"] == status for r in self.records)
+
+    @property
+    def n_ok(self) -> int:
+        return self.count("ok")
+
+    @property
+    def n_failed(self) -> int:
+        return self.count("failed")
+
+    @property
+    def n_skipped(self) -> int:
+        return self.count("skipped")
+
+    @property
+    def failed(self) -> list:
+        """The records of the failed items."""
+        return [r for r in self.records if r["status"] == "failed"]
+
+
+def _distributed():
+    try:
+        import distributed
+    except ImportError:
+        raise ImportError(_INSTALL) from None
+    return distributed
+
+
+@contextmanager
+def connect(client=None, *, workers: int | None = None, device: str = "auto"):
+    """A dask ``Client``: the one given, one connected to a scheduler address, or an embedded cluster.
+
+    Parameters
+    ----------
+    client : distributed.Client, str or None
+        ``None`` starts a ``LocalCluster`` of single-threaded worker processes,
+        ``workers`` of them (default: one per core; with ``device='cuda'``, one
+        with the resource ``GPU=1``); a string is a scheduler address
+        (``tcp://host:8786``); a client is used as it is.
+    workers : int, optional
+        Worker processes of the embedded cluster.
+    device : {'auto', 'cpu', 'cuda'}
+        Where the items will run (decides the embedded cluster's resources).
+
+    Yields
+    ------
+    distributed.Client
+        Closed on exit when this function made it (with its cluster).
+    """
+    distributed = _distributed()
+    if isinstance(client, distributed.Client):
+        yield client
+        return
+    if isinstance(client, (str, os.PathLike)):
+        with distributed.Client(str(client)) as c:
+            yield c
+        return
+    if client is not None:
+        raise TypeError(f"client must be a distributed.Client, a scheduler address or None; got {client!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers must be an integer >= 1; got {workers!r}")
+    import torch
+
+    gpu = device == "cuda" or (device == "auto" and torch.cuda.is_available())
+    n = workers or (1 if gpu else os.cpu_count() or 1)
+    cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                       resources={"GPU": 1} if gpu else None, dashboard_address=":0",
+                                       env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+    with cluster, distributed.Client(cluster) as c:
+        yield c
+
+
+def gpu_workers(client) -> int:
+    """How many workers of ``client``'s cluster offer the resource ``GPU``."""
+    workers = client.scheduler_info().get("workers", {})
+    return sum(1 for w in workers.values() if w.get("resources", {}).get("GPU", 0) >= 1)
+
+
+def expand_inputs(inputs) -> list[Path]:
+    """The input files or folders: a glob pattern, one path, or a sequence of paths (order kept)."""
+    if isinstance(inputs, (str, os.PathLike)):
+        text = str(inputs)
+        if glob.has_magic(text):
+            found = [Path(p) for p in sorted(glob.glob(text, recursive=True))]
+            if not found:
+                raise ValueError(f"no input matches {text!r}")
+            return found
+        inputs = [inputs]
+    try:
+        paths = [Path(p) for p in inputs]
+    except TypeError:
+        raise TypeError(f"inputs must be a glob pattern, a path or a sequence of paths; got {inputs!r}") from None
+    if not paths:
+        raise ValueError("no inputs")
+    names = {}
+    for p in paths:
+        if p.name in names:
+            raise ValueError(f"inputs {names[p.name]} and {p} share the name {p.name!r}; their outputs and "
+                             "seeds would collide: rename one")
+        names[p.name] = p
+    return paths
+
+
+def _is_done(spec: dict, last: dict | None) -> bool:
+    """Whether the output exists and matches its manifest record (status ok, same item, same size)."""
+    if last is None or last.get("status") != "ok" or spec["overwrite"]:
+        return False
+    out = Path(spec["output"])
+    same = all(last.get(k) == v for k, v in item_metadata(spec).items())
+    return (same and out.is_file()
+            and out.stat().st_size == last.get("size") and Path(spec["path_json"]).is_file())
+
+
+def _sweep_temporaries(out_dir: Path, specs) -> None:
+    """Remove temporary files left by killed writers of these items (no task of theirs is running)."""
+    for spec in specs:
+        for name in (Path(spec["output"]).name, Path(spec["path_json"]).name):
+            for tmp in out_dir.glob(f".{glob.escape(name)}.tmp*"):
+                if tmp.is_file():
+                    tmp.unlink(missing_ok=True)
+
+
+def _record(spec: dict, result: dict) -> dict:
+    out_dir = Path(spec["output"]).parent
+    return {
+        "kind": spec["kind"], "input": spec["input"], "name": spec["name"], "index": spec["index"],
+        "output": Path(spec["output"]).name, "path": Path(spec["path_json"]).relative_to(out_dir).as_posix(),
+        "parameters": spec["parameters"], "seed": spec["seed"], "item_seed": spec["item_seed"],
+        "version": spec["version"], "finished": datetime.datetime.now(datetime.timezone.utc).isoformat(),
+        **result,
+    }
+
+
+def _failure(exc) -> dict:
+    return {"status": "failed", "error": f"{type(exc).__name__}: {exc}", "size": None, "shape": None,
+            "recovered": False, "time": None, "warnings": []}
+
+
+def _collect(client, todo, resources, manifest, callback, records):
+    """Submit the items, append each finished one to the manifest, call ``callback``."""
+    distributed = _distributed()
+    futures = {}
+    for i, spec in todo:
+        key = f"lfdeblur-{spec['kind']}-{spec['name']}-{spec['index']}-{os.urandom(4).hex()}"
+        futures[client.submit(run_item, spec, key=key, pure=False, resources=resources)] = (i, spec)
+    try:
+        for fut in distributed.as_completed(list(futures)):
+            i, spec = futures.pop(fut)
+            try:
+                result = fut.result()
+            except Exception as exc:  # a killed worker, a cancelled task: the item failed, the run goes on
+                result = _failure(exc)
+            rec = _record(spec, result)
+            append_record(manifest, rec)
+            records[i] = rec
+            if callback is not None:
+                callback(rec)
+    finally:
+        if futures:
+            client.cancel(list(futures))
+
+
+def run_batch(specs: list, out_dir: Path, *, client, workers, device, card: dict, callback=None) -> BatchReport:
+    """Run the items ``specs`` (dicts, see :func:`~._items.run_item`) into ``out_dir``."""
+    if device not in ("auto", "cpu", "cuda"):
+        raise ValueError(f"device must be 'auto', 'cpu' or 'cuda'; got {device!r}")
+    outputs = [Path(s["output"]).name for s in specs]
+    if len(set(outputs)) < len(outputs):
+        dup = sorted({o for o in outputs if outputs.count(o) > 1})
+        raise ValueError(f"several inputs would write {', '.join(dup[:3])}: rename them")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    check_card(out_dir)
+    with open_manifest(out_dir) as manifest:
+        last = read_manifest(out_dir)
+        records, todo = [None] * len(specs), []
+        for i, spec in enumerate(specs):
+            prev = last.get(Path(spec["output"]).name)
+            if _is_done(spec, prev):
+                records[i] = {**prev, "status": "skipped"}
+                if callback is not None:
+                    callback(records[i])
+            else:
+                todo.append((i, spec))
+        write_card(out_dir, **card)
+        _sweep_temporaries(out_dir, [s for _, s in todo])
+        if todo:
+            with connect(client, workers=workers, device=device) as c:
+                use_gpu = _use_gpu(c, device)
+                for _, spec in todo:
+                    spec["device"] = "cuda" if use_gpu else "cpu"
+                try:
+                    _collect(c, todo, {"GPU": 1} if use_gpu else None, manifest, callback, records)
+                finally:
+                    _sweep_temporaries(out_dir, [s for _, s in todo])
+        report = BatchReport(out_dir=out_dir, records=records)
+        write_card(out_dir, **card, counts={"ok": report.n_ok, "skipped": report.n_skipped,
+                                            "failed": report.n_failed})
+    return report
+
+
+def _use_gpu(client, device: str) -> bool:
+    """Whether the items run on GPU workers: ``'cuda'`` requires them, ``'auto'`` uses them when present."""
+    if device == "cpu":
+        return False
+    n = gpu_workers(client)
+    if device == "cuda" and n == 0:
+        raise ValueError("device='cuda' but no worker offers the resource GPU: start workers with "
+                         "`dask worker SCHEDULER --resources GPU=1`")
+    return n > 0
+
+
+def make_spec(kind, inp: Path, index: int, output: Path, *, parameters: dict, seed: int, overwrite: bool,
+              version: str) -> dict:
+    """The small dict that describes one item to its task."""
+    from ..io._write import sidecar_path_json
+
+    parameters = json.loads(json.dumps(parameters))  # as the manifest holds them: lists, not tuples
+    return {"kind": kind, "input": str(inp.resolve()), "name": inp.name, "index": index,
+            "output": str(output), "path_json": str(sidecar_path_json(output, "npz")),
+            "parameters": parameters, "seed": seed, "item_seed": item_seed(seed, inp.name, index),
+            "overwrite": bool(overwrite), "version": version, "device": "cpu"}

@@ -1,0 +1,196 @@
+"""Batch simulation and deblurring on a real dask LocalCluster (2 single-threaded worker processes).
+
+The cluster is started by a fixture and closed after the module; nothing needs to run beforehand.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+distributed = pytest.importorskip("distributed")
+pytestmark = pytest.mark.filterwarnings("ignore::napari_lfdeblur.io.ViewOrderWarning")  # random test scenes
+
+from napari_lfdeblur import blind_deblur, read_lightfield, simulate_blur, write_lightfield  # noqa: E402
+from napari_lfdeblur.batch import deblur_many, item_seed, read_manifest, simulate_dataset, simulate_item  # noqa: E402
+from napari_lfdeblur.blind import BlindParams  # noqa: E402
+from napari_lfdeblur.cli import main  # noqa: E402
+from napari_lfdeblur.path import load_path_json  # noqa: E402
+
+TINY = BlindParams.preset("default").replace(
+    path={"n_outer": 1, "n_restarts": 1, "n_random": 10, "n_random_later": 5, "steps": 5, "estimate_z": False,
+          "min_size": 8},
+    final={"n_iter": 2},
+)
+
+
+@pytest.fixture(scope="module")
+def client():
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+        with distributed.Client(c) as cl:
+            yield cl
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("inputs")
+    rng = np.random.default_rng(0)
+    paths = []
+    for i in range(3):
+        paths.append(write_lightfield(folder / f"scene{i}.npz", rng.random((3, 3, 8, 8, 3)).astype(np.float32)))
+    return paths
+
+
+def _serial(fn):
+    """Run ``fn`` with one torch thread, as the batch tasks do."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return fn()
+    finally:
+        torch.set_num_threads(n)
+
+
+def _lines(out):
+    return (Path(out) / "manifest.jsonl").read_text().splitlines()
+
+
+def _leftovers(out):
+    return sorted(p.name for p in Path(out).iterdir() if ".tmp" in p.name)
+
+
+def test_simulate_equals_the_serial_api_bit_for_bit(client, inputs, tmp_path):
+    report = simulate_dataset(inputs, tmp_path, n_per_input=2, path_kind="shake", extent=(1.0, 3.0),
+                              infinity_disparity=0.5, noise=0.02, seed=7, client=client, device="cpu")
+    assert report.n_ok == 6 and report.n_failed == 0
+    for p in inputs:
+        lf = read_lightfield(p)
+        for k in range(2):
+            out = tmp_path / f"{p.stem}_{k:04d}.npz"
+            want, cp = _serial(lambda: simulate_item(lf, p.name, k, path_kind="shake", extent=(1.0, 3.0),
+                                                     infinity_disparity=0.5, noise=0.02, seed=7))
+            assert np.array_equal(read_lightfield(out), want)
+            np.testing.assert_array_equal(load_path_json(tmp_path / f"{p.stem}_{k:04d}.path.json"), cp)
+    # without noise an item is simulate_blur by its path, exactly
+    simulate_dataset(inputs[:1], tmp_path / "clean", seed=3, path_kind="linear", client=client, device="cpu")
+    cp = load_path_json(tmp_path / "clean" / "scene0_0000.path.json")
+    want = _serial(lambda: simulate_blur(read_lightfield(inputs[0]), cp))
+    assert np.array_equal(read_lightfield(tmp_path / "clean" / "scene0_0000.npz"), want)
+    rec = json.loads(_lines(tmp_path)[0])
+    assert {"input", "output", "parameters", "seed", "item_seed", "version", "status", "time", "error",
+            "size"} <= set(rec)
+    assert "simulate_dataset" in (tmp_path / "README.md").read_text()
+
+
+def test_deblur_equals_the_serial_api_bit_for_bit(client, tmp_path):
+    rng = np.random.default_rng(1)
+    paths = [write_lightfield(tmp_path / f"b{i}.npz", rng.random((3, 3, 16, 16)).astype(np.float32))
+             for i in range(2)]
+    report = deblur_many(paths, tmp_path / "out", params=TINY, seed=5, client=client, device="cpu")
+    assert report.n_ok == 2
+    for p in paths:
+        want = _serial(lambda: blind_deblur(read_lightfield(p), params=TINY, seed=item_seed(5, p.name, 0),
+                                            device="cpu"))
+        assert np.array_equal(read_lightfield(tmp_path / "out" / f"{p.stem}.npz"), want.lightfield)
+        np.testing.assert_array_equal(load_path_json(tmp_path / "out" / f"{p.stem}.path.json"),
+                                      want.control_points)
+
+
+def test_bad_items_are_recorded_and_the_others_complete(client, inputs, tmp_path, capsys):
+    bad = tmp_path / "in"
+    bad.mkdir()
+    (bad / "corrupt.npz").write_bytes(b"not a zip file")
+    nan = np.full((3, 3, 8, 8), np.nan, dtype=np.float32)
+    np.save(bad / "nan.npy", nan)
+    files = [*inputs, bad / "corrupt.npz", bad / "nan.npy"]
+    report = simulate_dataset(files, tmp_path / "out", client=client, device="cpu")
+    assert report.n_ok == 3 and report.n_failed == 2
+    last = read_manifest(tmp_path / "out")
+    assert "corrupt_0000.npz" in last and "not a readable" in last["corrupt_0000.npz"]["error"]
+    assert last["nan_0000.npz"]["status"] == "failed" and "NaN" in last["nan_0000.npz"]["error"]
+    assert not (tmp_path / "out" / "corrupt_0000.npz").exists()
+    # the CLI says how many failed, with exit status 1; bad usage is 2
+    argv = ["batch", "simulate", str(bad / "*"), str(tmp_path / "cli"), "--scheduler", client.scheduler.address,
+            "--device", "cpu"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "2 of 2 items failed" in err and "corrupt.npz" in err and "dashboard" in err
+    assert main(["batch", "simulate", str(tmp_path / "none*.npz"), str(tmp_path / "cli")]) == 2
+
+
+def test_a_rerun_skips_finished_items_and_redoes_the_others(client, inputs, tmp_path):
+    out = tmp_path / "out"
+    assert simulate_dataset(inputs, out, n_per_input=2, client=client, device="cpu").n_ok == 6
+    again = simulate_dataset(inputs, out, n_per_input=2, client=client, device="cpu")
+    assert (again.n_ok, again.n_skipped) == (0, 6) and len(_lines(out)) == 6  # no work done
+    (out / "scene1_0001.npz").unlink()
+    before = read_lightfield(out / "scene2_0000.npz")
+    data = (out / "scene2_0000.npz").read_bytes()
+    (out / "scene2_0000.npz").write_bytes(data[: len(data) // 2])  # cut short: redone
+    write_lightfield(out / "scene0_0000.npz", np.zeros((2, 2, 4, 4)), overwrite=True)  # someone else's file
+    third = simulate_dataset(inputs, out, n_per_input=2, client=client, device="cpu")
+    assert (third.n_skipped, third.n_ok, third.n_failed) == (3, 2, 1)
+    assert "pass overwrite" in third.failed[0]["error"] and read_lightfield(out / "scene0_0000.npz").shape[0] == 2
+    assert np.array_equal(read_lightfield(out / "scene2_0000.npz"), before)
+    fourth = simulate_dataset(inputs, out, n_per_input=2, client=client, device="cpu", overwrite=True)
+    assert fourth.n_ok == 6
+    # other parameters into the same folder: existing outputs are never replaced without overwrite
+    changed = simulate_dataset(inputs, out, n_per_input=1, noise=0.1, client=client, device="cpu")
+    assert changed.n_failed == 3 and changed.n_ok == 0
+
+
+def test_a_killed_run_leaves_no_corrupt_file_and_a_rerun_completes_it(client, tmp_path):
+    rng = np.random.default_rng(2)
+    paths = [write_lightfield(tmp_path / f"k{i}.npz", rng.random((3, 3, 16, 16)).astype(np.float32))
+             for i in range(4)]
+    out = tmp_path / "out"
+    restarted = threading.Event()
+
+    def restart_on_first(rec):  # kill every worker while the other items run
+        if not restarted.is_set():
+            restarted.set()
+            client.restart()
+
+    first = deblur_many(paths, out, params=TINY, client=client, device="cpu", callback=restart_on_first)
+    assert restarted.is_set() and first.n_ok + first.n_failed == 4 and first.n_failed >= 1
+    assert all("cancelled" in r["error"] for r in first.failed)  # recorded, not lost
+    # what a kill at any other moment can leave: a writer's temporary file, an orphan path JSON,
+    # a manifest line cut short, an output written but not yet recorded
+    (out / ".k3.npz.tmp123-abcd.npz").write_bytes(b"partial")
+    (out / "k3.path.json").write_text("{}")
+    with open(out / "manifest.jsonl", "a") as fh:
+        fh.write('{"output": "k0.npz", "stat')
+    second = deblur_many(paths, out, params=TINY, client=client, device="cpu")
+    assert second.n_failed == 0 and second.n_ok + second.n_skipped == 4
+    assert _leftovers(out) == []
+    for p in paths:
+        want = _serial(lambda: blind_deblur(read_lightfield(p), params=TINY, seed=item_seed(0, p.name, 0),
+                                            device="cpu"))
+        assert np.array_equal(read_lightfield(out / p.name), want.lightfield)
+    last = read_manifest(out)
+    assert all(last[p.name]["status"] == "ok" for p in paths)
+    # an output on disk whose manifest line was lost is recognised as this item's, not recomputed or refused
+    lines = [ln for ln in _lines(out) if '"k1.npz"' not in ln]
+    (out / "manifest.jsonl").write_text("\n".join(lines) + "\n")
+    third = deblur_many(paths, out, params=TINY, client=client, device="cpu")
+    assert third.n_skipped == 3 and third.n_ok == 1 and read_manifest(out)["k1.npz"]["recovered"] is True
+
+
+def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    (tmp_path / "in").mkdir()
+    write_lightfield(tmp_path / "in" / "c0.npz", rng.random((3, 3, 16, 16)).astype(np.float32))
+    (tmp_path / "tiny.json").write_text(TINY.to_json())
+    argv = ["batch", "deblur", str(tmp_path / "in" / "*.npz"), str(tmp_path / "out"), "--params",
+            str(tmp_path / "tiny.json"), "--scheduler", client.scheduler.address, "--device", "cpu"]
+    assert main(argv) == 0
+    assert "all 1 items" in capsys.readouterr().out
+    assert read_manifest(tmp_path / "out")["c0.npz"]["status"] == "ok"
+    assert "lfdeblur batch deblur" in (tmp_path / "out" / "README.md").read_text()
+    assert main(argv) == 0 and "1 already done" in capsys.readouterr().out
