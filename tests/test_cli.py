@@ -113,3 +113,26 @@ def test_deblur_help_says_where_infinity_disparity_comes_from(capsys):
     with pytest.raises(SystemExit):
         main(["deblur", "--help"])
     assert "farthest" in " ".join(capsys.readouterr().out.split())
+
+
+def test_simulate_states_t_and_infinity_disparity_and_deblur_uses_it(lf_file, tmp_path, capsys):
+    from napari_lfdeblur.io import read_lightfield_with_metadata
+
+    _, src = lf_file
+    out = tmp_path / "b.npz"
+    assert main(["simulate", str(src), str(out), "--path", "linear:1", "--n-times", "8",
+                 "--infinity-disparity", "0.5"]) == 0
+    _, meta = read_lightfield_with_metadata(out)
+    assert meta["infinity_disparity"] == 0.5 and meta["n_times"] == 8
+    doc = json.loads((tmp_path / "b.path.json").read_text())
+    assert doc["infinity_disparity"] == 0.5 and doc["n_times"] == 8
+    # a file that states an impossible d_inf: deblur takes it from the file, and refuses it in one line
+    lf = np.random.default_rng(1).random((5, 5, 12, 12)).astype(np.float32)
+    from napari_lfdeblur import write_lightfield
+
+    write_lightfield(tmp_path / "far.npz", lf, metadata={"infinity_disparity": 100.0})
+    capsys.readouterr()
+    assert main(["deblur", str(tmp_path / "far.npz"), str(tmp_path / "o.npz"), "--device", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert "as " in err and "states" in err and "infinity_disparity" in err.splitlines()[-1]
+    assert not (tmp_path / "o.npz").exists()

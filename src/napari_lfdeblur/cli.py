@@ -126,8 +126,10 @@ def _run_simulate(args):
     blurred = simulate_blur(
         lf, cp, n_times=args.n_times, infinity_disparity=args.infinity_disparity, device=args.device
     )
-    written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp)
-    print(f"wrote {written} {blurred.shape}, with its camera path beside it")
+    written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp,
+                               metadata={"kind": "blurred", "n_times": args.n_times,
+                                         "infinity_disparity": args.infinity_disparity})
+    print(f"wrote {written} {blurred.shape}, with its camera path, T and d_inf beside it")
 
 
 # ---------------------------------------------------------------- deblur
@@ -141,8 +143,9 @@ def _add_deblur(sub):
     p.add_argument("--params", help="a JSON file of BlindParams, nested by stage as BlindParams.to_json writes "
                    "it; keys left out take their defaults (overrides --preset)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
-    p.add_argument("--infinity-disparity", type=float, default=0.0, metavar="D_INF",
-                   help="disparity of points at infinity, px/view (default 0: a camera focused at infinity). "
+    p.add_argument("--infinity-disparity", type=float, default=None, metavar="D_INF",
+                   help="disparity of points at infinity, px/view (default: the value the input file states, as "
+                        "files written by lfdeblur simulate do, else 0: a camera focused at infinity). "
                         "With the views' zero disparity on the focal plane, it is about the disparity of the "
                         "farthest content (sky, a far wall); the blind solver cannot estimate it (see "
                         "docs/blind.md)")
@@ -155,6 +158,23 @@ def _add_deblur(sub):
                         "(BlindParams.require_evidence=False; default: return the input unchanged then)")
     p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+
+
+def _stated_infinity_disparity(given, meta: dict, source) -> float:
+    """``given`` when set, else the ``infinity_disparity`` the input's metadata states (said on stderr), else 0."""
+    if given is not None:
+        return given
+    stated = meta.get("infinity_disparity")
+    if stated is None:
+        return 0.0
+    try:
+        d_inf = float(stated)
+    except (TypeError, ValueError):
+        raise CLIError(f"{source} states infinity_disparity = {stated!r}, which is not a number; "
+                       "pass --infinity-disparity") from None
+    print(f"using infinity disparity {d_inf:g} px/view, as {source} states (--infinity-disparity overrides it)",
+          file=sys.stderr)
+    return d_inf
 
 
 def _run_deblur(args):
@@ -178,9 +198,9 @@ def _run_deblur(args):
         params = params.replace(latent={"edge_anisotropy": args.edge_anisotropy})
     if args.restore_anyway:
         params = params.replace(require_evidence=False)
-    lf, _ = _read(args)
-    gen = iter_blind_deblur(lf, infinity_disparity=args.infinity_disparity, params=params,
-                            device=args.device, seed=args.seed)
+    lf, meta = _read(args)
+    d_inf = _stated_infinity_disparity(args.infinity_disparity, meta, args.input)
+    gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=args.device, seed=args.seed)
     bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
 
     def show(rec):
@@ -193,9 +213,10 @@ def _run_deblur(args):
     finally:
         gen.close()
         bar.close()
-    write_lightfield(out, result.lightfield, overwrite=args.overwrite)
+    write_lightfield(out, result.lightfield, overwrite=args.overwrite,
+                     metadata={"kind": "deblurred (blind)", "infinity_disparity": d_inf})
     save_path_json(path_file, result.control_points, overwrite=True, n_times=params.n_times,
-                   infinity_disparity=args.infinity_disparity, preset=args.preset if not args.params else None,
+                   infinity_disparity=d_inf, preset=args.preset if not args.params else None,
                    timings=result.timings)
     if "message" in result.info:
         print(result.info["message"])
@@ -271,11 +292,13 @@ def _add_deconvolve(sub):
                    help="auto (default: inplane when p_z = 0 and d_inf = 0, else tv), tv or inplane")
     p.add_argument("--weight", type=float, default=None, help="regularisation weight >= 0 (default 2e-3)")
     p.add_argument("--iterations", type=int, default=200, help="maximum TV iterations (default 200)")
-    p.add_argument("--tol", type=float, default=1e-4, help="TV stops at this relative change (default 1e-4)")
+    p.add_argument("--tol", type=float, default=1e-4,
+                   help="TV stops when the objective falls by less than this fraction in an iteration (default 1e-4)")
     p.add_argument("--n-times", type=int, default=None,
                    help="exposure instants T (default: the path file's n_times, else 32)")
     p.add_argument("--infinity-disparity", type=float, default=None,
-                   help="d_inf in px/view (default: the path file's infinity_disparity, else 0)")
+                   help="d_inf in px/view (default: the path file's infinity_disparity, else the input file's, "
+                        "else 0)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
 
@@ -298,10 +321,11 @@ def _run_deconvolve(args):
         doc = {}
     doc = doc if isinstance(doc, dict) else {}
     n_times = args.n_times if args.n_times is not None else int(doc.get("n_times", 32))
-    d_inf = args.infinity_disparity
-    if d_inf is None:
-        d_inf = float(doc.get("infinity_disparity", 0.0))
-    blurred, _ = _read(args)
+    given = args.infinity_disparity
+    if given is None and doc.get("infinity_disparity") is not None:
+        given = float(doc["infinity_disparity"])
+    blurred, meta = _read(args)
+    d_inf = _stated_infinity_disparity(given, meta, args.input)
     gen = iter_deconvolve(
         blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device,
         method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,

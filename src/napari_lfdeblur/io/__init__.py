@@ -39,7 +39,7 @@ from ._common import (
     LightFieldReadError,
     available_memory,
 )
-from ._write import write_lightfield
+from ._write import PATH_FIELDS, write_lightfield
 
 __all__ = [
     "read_lightfield",
@@ -207,6 +207,10 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
         JSON-serialisable: ``source`` (the path), ``layout``, ``shape``,
         ``dtype``, ``file_dtype`` (as stored), and layout-specific entries,
         such as ``camera`` (camera parameters when the file has them).
+        Metadata stored by :func:`write_lightfield` is in ``saved_metadata``;
+        the blur it states, ``n_times`` and ``infinity_disparity`` (as
+        ``lfdeblur simulate`` and the napari writers store them), is also
+        copied to the top level.
     """
     path = _as_path(path)
     if not path.exists():
@@ -257,6 +261,11 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
         "dtype": str(lf.dtype),
         **meta,
     }
+    # what a file written by this package states about the blur (T, d_inf) is read back as such
+    saved = metadata.get("saved_metadata")
+    for key in PATH_FIELDS:
+        if isinstance(saved, dict) and key in saved and key not in metadata:
+            metadata[key] = saved[key]
     _check_view_order(lf, path, metadata)
     return lf, metadata
 

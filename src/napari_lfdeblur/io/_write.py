@@ -169,6 +169,14 @@ def _replaceable(name: str) -> bool:
     return bool(_VIEW_NAME.match(name)) or name in SIDECAR_NAMES
 
 
+#: metadata fields that describe a path's blur, copied into its path JSON so that a path file states them too
+PATH_FIELDS = ("n_times", "infinity_disparity")
+
+
+def _path_fields(meta: dict) -> dict:
+    return {k: meta[k] for k in PATH_FIELDS if k in meta}
+
+
 def _write_views(path, data, meta, cp, *, overwrite):
     """A folder of ``view_RR_CC.png`` (1-based), ``lightfield.json`` and, with a path, ``path.json``."""
     V, U = data.shape[:2]
@@ -181,7 +189,7 @@ def _write_views(path, data, meta, cp, *, overwrite):
         if cp is not None:
             from ..path import save_path_json
 
-            save_path_json(tmp / "path.json", cp)
+            save_path_json(tmp / "path.json", cp, **_path_fields(meta))
 
 
 _ARRAY_WRITERS = {"npz": _write_npz, "npy": _write_npy, "tiff": _write_tiff, "h5": _write_h5}
@@ -226,6 +234,8 @@ def write_lightfield(
         A camera path; written next to the output as JSON by
         :func:`napari_lfdeblur.path.save_path_json` (``<name>.path.json``, or
         ``path.json`` inside a views folder), and embedded in ``.npz``/``.h5``.
+        The path JSON also states ``n_times`` and ``infinity_disparity`` when
+        ``metadata`` holds them.
     compress : bool
         Compress ``.npz``, TIFF and HDF5 data (lossless).
 
@@ -276,5 +286,5 @@ def write_lightfield(
     if sidecar is not None:
         from ..path import save_path_json
 
-        save_path_json(sidecar, cp, overwrite=overwrite)
+        save_path_json(sidecar, cp, overwrite=overwrite, **_path_fields(meta))
     return path
