@@ -164,11 +164,14 @@ class Taps:
 
 
 class TapBlur(torch.autograd.Function):
-    """``f = taps(K) * L`` with gradients for the light field and the kernel, recomputed block-wise."""
+    """``f = taps(K) * L`` with gradients for the light field and the kernel, recomputed block-wise.
+
+    ``taps`` is the :class:`Taps` (or :class:`~napari_lfdeblur._taps4d.Taps4D`)
+    built from ``K``; ``K`` is passed too so that autograd carries its gradient.
+    """
 
     @staticmethod
-    def forward(ctx, L, K, ov, ou, block_elements):
-        taps = Taps(L.shape, K, ov, ou, block_elements)
+    def forward(ctx, L, K, taps):
         ctx.save_for_backward(L)
         ctx.taps = taps
         return taps.forward(L)
@@ -176,5 +179,5 @@ class TapBlur(torch.autograd.Function):
     @staticmethod
     def backward(ctx, G):
         (L,) = ctx.saved_tensors
-        gL, gK = ctx.taps.backward(L, G, ctx.needs_input_grad[0], ctx.needs_input_grad[1])
-        return gL, gK, None, None, None
+        gL, gK = ctx.taps.backward(L, G.contiguous(), ctx.needs_input_grad[0], ctx.needs_input_grad[1])
+        return gL, gK, None

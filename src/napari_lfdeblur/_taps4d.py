@@ -26,7 +26,7 @@ import torch
 
 from ._taps import fold, rows_per_block
 
-__all__ = ["pair_splat", "tap_kernel_4d", "Taps4D", "TapBlur4D"]
+__all__ = ["pair_splat", "tap_kernel_4d", "Taps4D"]
 
 
 def pair_splat(shift: torch.Tensor, d_inf: float, n_views: int, n_pixels: int):
@@ -181,20 +181,3 @@ class Taps4D:
 
     def adjoint(self, G):
         return self.backward(None, G, need_L=True, need_K=False)[0]
-
-
-class TapBlur4D(torch.autograd.Function):
-    """``f = taps(K) * L`` over 4D offsets, with gradients for the light field and the kernel."""
-
-    @staticmethod
-    def forward(ctx, L, K, offsets, block_elements):
-        taps = Taps4D(L.shape, K, offsets, block_elements)
-        ctx.save_for_backward(L)
-        ctx.taps = taps
-        return taps.forward(L)
-
-    @staticmethod
-    def backward(ctx, G):
-        (L,) = ctx.saved_tensors
-        gL, gK = ctx.taps.backward(L, G.contiguous(), ctx.needs_input_grad[0], ctx.needs_input_grad[1])
-        return gL, gK, None, None

@@ -39,7 +39,7 @@ import torch
 from ._lightfield import check_number, validate_lightfield
 from .devices import select_device
 from ._taps import TapBlur, Taps, tap_kernel
-from ._taps4d import TapBlur4D, Taps4D, tap_kernel_4d
+from ._taps4d import Taps4D, tap_kernel_4d
 from .path import bezier_positions, validate_control_points, validate_n_times
 
 __all__ = [
@@ -287,9 +287,9 @@ class BlurOperator:
         L = self._check(lf)
         if self.infinity_disparity == 0.0:
             K, ov, ou = self._kernel
-            return TapBlur.apply(L, K, ov, ou, self.block_elements)
+            return TapBlur.apply(L, K, Taps(self.shape, K, ov, ou, self.block_elements))
         K, offsets = self._kernel
-        return TapBlur4D.apply(L, K, offsets, self.block_elements)
+        return TapBlur.apply(L, K, Taps4D(self.shape, K, offsets, self.block_elements))
 
     __call__ = forward
 
