@@ -25,7 +25,7 @@ from ._latent import difference_pair, l0_latent
 from ._params import BlindParams
 
 __all__ = ["noise_sigma", "blur_reach", "blur_evidence", "evidence_message", "Identity", "EVIDENCE_MARGIN",
-           "RELATIVE_MARGIN", "MIN_REACH", "CLEAR_REACH"]
+           "RELATIVE_MARGIN", "MIN_REACH"]
 
 #: the blur model must lower the salient-edge objective by more than this many noise variances per sample
 EVIDENCE_MARGIN = 1.0
@@ -33,10 +33,6 @@ EVIDENCE_MARGIN = 1.0
 RELATIVE_MARGIN = 0.06
 #: a blur whose largest image motion is below this (px) counts as no blur
 MIN_REACH = 0.25
-#: a blur whose estimate moves the image by at least this much (px) is taken as found even when the
-#: salient-edge comparison is inconclusive: the method reads the scene's own edge profile as a blur of
-#: up to about 2 px on sharp natural scenes, so only a clearly larger blur is told apart from it this way
-CLEAR_REACH = 3.0
 
 
 class Identity:
@@ -101,7 +97,7 @@ def evidence_message(evidence: dict, required: bool = True) -> str:
     why = []
     if not e["gain"] > EVIDENCE_MARGIN:
         why.append(f"the blur model explains {e['gain']:.2f} noise variances per sample more than no blur "
-                   f"(needs > {EVIDENCE_MARGIN:g}, or a blur of at least {CLEAR_REACH:g} px)")
+                   f"(needs > {EVIDENCE_MARGIN:g})")
     if not e["reach"] >= MIN_REACH:
         why.append(f"it moves the image by {e['reach']:.2f} px at most (needs >= {MIN_REACH:g})")
     verdict = "the input is returned unchanged" if required else "restored anyway (require_evidence=False)"
@@ -128,10 +124,9 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device):
     ``E = |K l - g|^2 / N + lam * edges / N`` of the salient-edge latent
     (``lam`` the smallest weight of the alternation) is computed with
     ``K = K_p`` (``E_blur``) and with ``K = I`` (``E_none``). The blur is
-    found when :func:`blur_reach` ``>= MIN_REACH`` and either
-    ``E_none - E_blur > EVIDENCE_MARGIN sigma^2`` (``sigma``:
-    :func:`noise_sigma`) and ``(E_none - E_blur) / E_none > RELATIVE_MARGIN``,
-    or the reach is at least ``CLEAR_REACH``.
+    found when ``E_none - E_blur > EVIDENCE_MARGIN sigma^2`` (``sigma``:
+    :func:`noise_sigma`), ``(E_none - E_blur) / E_none > RELATIVE_MARGIN``
+    and :func:`blur_reach` ``>= MIN_REACH``.
 
     A generator (yields the latents' conjugate-gradient iterates, where the
     caller may report or stop); returns a dict of floats: ``sigma``,
@@ -149,8 +144,7 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device):
     gain = (e0 - e1) / sigma**2
     relative = (e0 - e1) / max(e0, 1e-30)
     reach = blur_reach(cp, p.n_times, g)
-    clear = gain > EVIDENCE_MARGIN and relative > RELATIVE_MARGIN
-    found = bool(reach >= MIN_REACH and (clear or reach >= CLEAR_REACH))
+    found = bool(gain > EVIDENCE_MARGIN and relative > RELATIVE_MARGIN and reach >= MIN_REACH)
     return {"sigma": sigma, "misfit_blur": m_blur, "misfit_none": m_none, "edges_blur": e_blur,
             "edges_none": e_none, "gain": gain, "relative": relative, "reach": reach,
             "blur_found": found}
