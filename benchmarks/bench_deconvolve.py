@@ -132,7 +132,7 @@ def _write(results, shape, out, argv):
     body = [
         f"A random {'x'.join(map(str, shape))} float32 light field, T = 32, d_inf = 0.",
         "`inplane`: linear in-plane path of 2 views, one exact per-pixel solve. `tv`: linear path of 2 views",
-        "with p_z from -0.5 to 0.5, primal-dual 4D-TV iterations (capped; `tol=0`).",
+        "with p_z from -0.5 to 0.5, 4D-TV iterations (FISTA with a warm-started TV prox; capped, `tol=0`).",
         "Peak memory: resident set size above the input's level on the CPU; `torch.cuda.max_memory_allocated` on a GPU.",
         "",
         *HEADER,
