@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/bench_batch.py [--items 1000] [--scaling-items 48] [--overhead-items 16] [--out PATH]
+    python benchmarks/bench_batch.py [--items 1000] [--scaling-items 48] [--overhead-items 64] [--out PATH]
 
 Three measurements, all of ``simulate_dataset`` (random paths, T = 32, noise 0.01) on
 single-threaded worker processes, timed from the submission of the items to the last
@@ -151,7 +151,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--items", type=int, default=1000, help="items of the many-items run (default 1000)")
     parser.add_argument("--scaling-items", type=int, default=48, help="items of the 1 vs 2 workers runs")
-    parser.add_argument("--overhead-items", type=int, default=16, help="items of the overhead runs")
+    parser.add_argument("--overhead-items", type=int, default=64, help="items of the overhead runs")
     parser.add_argument("--workdir", type=Path, help="scratch folder (default: a temporary one, removed)")
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
