@@ -165,8 +165,7 @@ def main(argv=None):
         "`simulate_dataset` (random paths, T = 32, noise 0.01) on single-threaded worker processes of a local "
         "dask cluster, timed from submission to the last manifest line, the cluster already started. The "
         "plain loop reads, simulates and writes the same items in one process with one torch thread. "
-        f"Load average of the machine before and after the run: up to {load:.1f} on {os.cpu_count()} cores"
-        + (" (above the core count: other processes shared the cores)." if load > (os.cpu_count() or 1) else "."),
+        f"Load average of the machine before and after the run: up to {load:.1f} on {os.cpu_count()} cores.",
         "",
         *rows,
     ]
