@@ -5,6 +5,7 @@ The cluster is started by a fixture and closed after the module; nothing needs t
 
 from __future__ import annotations
 
+import os
 import json
 import threading
 from pathlib import Path
@@ -194,3 +195,28 @@ def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
     assert read_manifest(tmp_path / "out")["c0.npz"]["status"] == "ok"
     assert "lfdeblur batch deblur" in (tmp_path / "out" / "README.md").read_text()
     assert main(argv) == 0 and "1 already done" in capsys.readouterr().out
+
+
+def test_embedded_cluster_workers_start_with_the_mmap_threshold_and_no_profiler():
+    # glibc reads MALLOC_MMAP_THRESHOLD_ once, at process start: it must be in the worker's environment
+    # from the spawn on, not set afterwards by the nanny
+    from napari_lfdeblur.batch import connect
+    WORKER_MMAP_THRESHOLD = 32 * 2**20
+
+    def environ_at_start():
+        with open(f"/proc/{os.getpid()}/environ", "rb") as f:
+            start = dict(kv.split(b"=", 1) for kv in f.read().split(b"\0") if b"=" in kv)
+        return start.get(b"MALLOC_MMAP_THRESHOLD_", b"").decode()
+
+    if not Path("/proc/self/environ").exists():
+        pytest.skip("needs /proc (Linux)")
+    def profiling():
+        import dask
+
+        return dask.config.get("distributed.worker.profile.enabled")
+
+    with connect(workers=1, device="cpu") as c:
+        found = c.run(environ_at_start)
+        profiled = c.run(profiling)
+    assert list(found.values()) == [str(WORKER_MMAP_THRESHOLD)]
+    assert list(profiled.values()) == [False]

@@ -17,6 +17,14 @@ __all__ = ["BatchReport", "connect", "expand_inputs", "gpu_workers", "run_batch"
 
 _INSTALL = 'the batch API needs dask.distributed: pip install "napari-lfdeblur[batch]"'
 
+#: glibc's mmap threshold for the worker processes of the embedded cluster, in bytes. dask's nanny
+#: sets ``MALLOC_TRIM_THRESHOLD_`` before it spawns a worker, and any explicit malloc setting freezes
+#: glibc's dynamic mmap threshold at 128 KiB: every array over that size is then a fresh ``mmap``
+#: whose pages fault in on first touch, on every item. 32 MiB is the ceiling that glibc's dynamic
+#: threshold reaches in a plain process, so light fields up to that size reuse freed memory there too.
+WORKER_MMAP_THRESHOLD = 32 * 2**20
+_MMAP_KEY = "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_"
+
 
 @dataclass
 class BatchReport:
@@ -74,7 +82,11 @@ def connect(client=None, *, workers: int | None = None, device: str = "auto"):
         ``None`` starts a ``LocalCluster`` of single-threaded worker processes,
         ``workers`` of them (default: one per core; with ``device='cuda'``, one
         with the resource ``GPU=1``); a string is a scheduler address
-        (``tcp://host:8786``); a client is used as it is.
+        (``tcp://host:8786``); a client is used as it is. The embedded
+        cluster's workers start with glibc's mmap threshold at
+        :data:`WORKER_MMAP_THRESHOLD` and without dask's statistical profiler
+        (docs/batch.md says why; start a cluster of your own for the
+        dashboard's profile).
     workers : int, optional
         Worker processes of the embedded cluster.
     device : {'auto', 'cpu', 'cuda'}
@@ -101,9 +113,13 @@ def connect(client=None, *, workers: int | None = None, device: str = "auto"):
 
     gpu = device == "cuda" or (device == "auto" and torch.cuda.is_available())
     n = workers or (1 if gpu else os.cpu_count() or 1)
-    cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                       resources={"GPU": 1} if gpu else None, dashboard_address=":0",
-                                       env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+    import dask
+
+    # the workers' statistical profiler wakes every 10 ms and takes the GIL from the task: off here
+    with dask.config.set({_MMAP_KEY: str(WORKER_MMAP_THRESHOLD), "distributed.worker.profile.enabled": False}):
+        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                           resources={"GPU": 1} if gpu else None, dashboard_address=":0",
+                                           env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
     with cluster, distributed.Client(cluster) as c:
         yield c
 
