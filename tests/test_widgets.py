@@ -216,6 +216,9 @@ def test_deconvolve_takes_path_from_metadata(make_napari_viewer, qtbot, lf, noti
     np.testing.assert_allclose(w.table.control_points(), cp)
     assert w.form.n_times.value == 8
     w.form.method.value = "inplane"
+    assert not w.form.weight.enabled  # the weight comes from the noise until the box is unticked
+    w.form.noise_weight.value = False
+    assert w.form.weight.enabled
     w.form.weight.value = 0.0
     w.run()
     _wait_done(qtbot, w)
@@ -253,8 +256,9 @@ def test_deconvolve_tv_with_path_from_path_layer(make_napari_viewer, qtbot, lf, 
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
     out = viewer.layers["b deconvolved"].data
-    ref = deconvolve(blurred, cp, n_times=6, method="tv", weight=w.form.weight.value, n_iter=5)
+    ref = deconvolve(blurred, cp, n_times=6, method="tv", weight=None, n_iter=5)  # the default noise rule
     np.testing.assert_allclose(out, ref, atol=1e-5)
+    assert viewer.layers["b deconvolved"].metadata["parameters"]["weight"] is None
 
 
 def test_deconvolve_solver_error_is_a_notification(make_napari_viewer, qtbot, lf, notifications):
@@ -457,6 +461,9 @@ def test_blurred_sample_feeds_the_deconvolution_widget(make_napari_viewer, qtbot
     w.layer_combo.set_layer(layer)
     np.testing.assert_allclose(w.table.control_points(), BLURRED_SAMPLE_PATH, atol=1e-5)
     w.form.method.value = "inplane"
+    assert not w.form.weight.enabled  # the weight comes from the noise until the box is unticked
+    w.form.noise_weight.value = False
+    assert w.form.weight.enabled
     w.form.weight.value = 0.0
     w.run()
     _wait_done(qtbot, w)
@@ -489,6 +496,7 @@ def test_magicgui_form_runs_the_solver(make_napari_viewer, qtbot, lf, notificati
     form.n_times.value = 6
     form.infinity_disparity.value = 0.25
     form.method.value = "tv"
+    form.noise_weight.value = False
     form.weight.value = 0.004
     form.n_iter.value = 3
     form.device.value = "cpu"

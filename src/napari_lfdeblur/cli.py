@@ -288,9 +288,12 @@ def _add_deconvolve(sub):
     _input_argument(p, "blurred light field file or folder")
     p.add_argument("path_json", help="JSON file of the path's control points (as written by simulate)")
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
-    p.add_argument("--method", default="auto", choices=["auto", "tv", "inplane"],
-                   help="auto (default: inplane when p_z = 0 and d_inf = 0, else tv), tv or inplane")
-    p.add_argument("--weight", type=float, default=None, help="regularisation weight >= 0 (default 2e-3)")
+    p.add_argument("--method", default="tv", choices=["tv", "inplane", "auto"],
+                   help="tv (default: 4D total variation, any path and d_inf), inplane (the exact angular "
+                        "solve, p_z = 0 and d_inf = 0 only) or auto (the same as tv)")
+    p.add_argument("--weight", type=float, default=None,
+                   help="regularisation weight >= 0 (default: tv, 0.3 x the noise level estimated in the data; "
+                        "inplane, 2e-3)")
     p.add_argument("--iterations", type=int, default=200, help="maximum TV iterations (default 200)")
     p.add_argument("--tol", type=float, default=1e-4,
                    help="TV stops when the objective falls by less than this fraction in an iteration (default 1e-4)")

@@ -21,8 +21,10 @@
   times the noise level estimated in the data (:func:`estimate_noise_sigma`).
 * ``method='inplane'``: for an in-plane path (``p_z = 0``) and ``d_inf = 0``
   the exact angular solve of :func:`~napari_lfdeblur.special_cases.solve_inplane`
-  (Tikhonov on the angular differences), one small matrix for all pixels.
-* ``method='auto'`` picks ``'inplane'`` when it applies and ``'tv'`` otherwise.
+  (Tikhonov on the angular differences), one small matrix for all pixels:
+  fast, but its fixed weight does not follow the noise and it has no
+  spatial prior, so ``'tv'`` restores better, most of all on noisy data.
+* ``method='auto'`` (kept for saved presets) is ``'tv'``, the default.
 
 The paper's analytic special cases (refocusing, the textured plane, the
 in-plane matrix) are in :mod:`napari_lfdeblur.special_cases`. See
@@ -88,7 +90,8 @@ class DeconvolutionParams(JsonParams):
     Attributes
     ----------
     method : {'auto', 'tv', 'inplane'}
-        ``'auto'`` uses ``'inplane'`` when ``p_z = 0`` and ``d_inf = 0``.
+        ``'tv'`` (the default) for every path and ``d_inf``; ``'inplane'``
+        only for ``p_z = 0`` and ``d_inf = 0``; ``'auto'`` is ``'tv'``.
     weight : float or None
         Regularisation weight >= 0. For ``'tv'`` it multiplies the 4D TV;
         None (the default) sets it from the data: ``NOISE_WEIGHT_FACTOR *
@@ -110,7 +113,7 @@ class DeconvolutionParams(JsonParams):
         Constrain the estimate to [0, 1] when the input lies in [0, 1].
     """
 
-    method: str = "auto"
+    method: str = "tv"
     weight: float | None = None
     n_iter: int = 200
     tol: float = 1e-4
@@ -227,12 +230,12 @@ def _validate(blurred, control_points, n_times, infinity_disparity, init):
 def _choose_method(method: str, cp: np.ndarray, d_inf: float) -> str:
     in_plane = d_inf == 0.0 and bool(np.all(cp[:, 2] == 0))
     if method == "auto":
-        return "inplane" if in_plane else "tv"
+        return "tv"
     if method == "inplane" and not in_plane:
         raise ValueError(
             "method 'inplane' needs an in-plane path (p_z = 0 at every control point) and "
             f"infinity_disparity = 0; got max |p_z| = {np.abs(cp[:, 2]).max():g}, d_inf = {d_inf:g}. "
-            "Use method='tv' or 'auto'."
+            "Use method='tv'."
         )
     return method
 

@@ -2,7 +2,8 @@
 
 A thin shell over :func:`napari_lfdeblur.deconvolution.iter_deconvolve`. Its
 magicgui form (``form``) holds the input ``layer`` and the solver's keyword
-arguments: ``n_times``, ``infinity_disparity``, ``method``, ``weight``,
+arguments: ``n_times``, ``infinity_disparity``, ``method``, ``weight`` (None when
+``noise_weight`` is ticked: the noise rule),
 ``n_iter``, ``device``. The path (``table``) comes from
 
 - the blurred layer's own ``metadata['control_points']`` (set by the
@@ -19,7 +20,7 @@ the package version in its metadata.
 
 from __future__ import annotations
 
-from magicgui.widgets import ComboBox
+from magicgui.widgets import CheckBox, ComboBox
 
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata
 from ._controls import PathSource, PathTable, device_choice, fspin, has_path, heading, spin
@@ -38,8 +39,12 @@ def _fields() -> list:
         spin("n_times", 32, 2, 1024, label="instants T", tooltip="exposure instants T of the blur model"),
         fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
               tooltip="infinity disparity d_inf, px/view"),
-        ComboBox(name="method", choices=list(METHODS), value="auto",
-                 tooltip="auto: exact in-plane solve when p_z = 0 and d_inf = 0, else 4D TV"),
+        ComboBox(name="method", choices=[m for m in METHODS if m != "auto"], value="tv",
+                 tooltip="tv: 4D total variation, any path and d_inf; inplane: the exact angular solve, "
+                         "p_z = 0 and d_inf = 0 only"),
+        CheckBox(name="noise_weight", value=True, label="weight from noise",
+                 tooltip="TV weight = 0.3 x the noise level estimated in the data (inplane: 2e-3); "
+                         "untick to set the weight yourself"),
         fspin("weight", 2e-3, 0.0, 10.0, 1e-5, tooltip="regularisation weight (TV or angular Tikhonov)"),
         spin("n_iter", 100, 1, 100000, label="iterations", tooltip="maximum iterations of the TV solver"),
         device_choice(),
@@ -55,6 +60,8 @@ class DeconvolveWidget(SolverWidget):
         super().__init__(napari_viewer)
         self.form.extend(_fields())
         self.form.weight.native.setSingleStep(1e-3)
+        self.form.noise_weight.changed.connect(self._weight_mode)
+        self._weight_mode()
         self.path_source = PathSource(napari_viewer, self.set_path, title=self.title)
         self.table = PathTable()
         self.plot = PathPlot()
@@ -80,6 +87,10 @@ class DeconvolveWidget(SolverWidget):
         if layer is not None and has_path(layer):
             self.path_source.take_from(layer, quiet=True)
 
+    def _weight_mode(self, *_):
+        """The weight field is editable only when the weight does not come from the noise."""
+        self.form.weight.enabled = not self.form.noise_weight.value
+
     def take_path(self, *_):
         """Fill the table from the layer chosen in *take path from*."""
         self.path_source.take_path()
@@ -94,7 +105,10 @@ class DeconvolveWidget(SolverWidget):
     # ------------------------------------------------------------- job
     def parameters(self) -> dict:
         """The form's values (the input layer aside): ``iter_deconvolve``'s keyword arguments."""
-        return {k: v for k, v in self.form.asdict().items() if k != "layer"}
+        p = {k: v for k, v in self.form.asdict().items() if k != "layer"}
+        if p.pop("noise_weight"):
+            p["weight"] = None
+        return p
 
     def make_job(self, layer, lf):
         from ...deconvolution import iter_deconvolve
