@@ -665,7 +665,7 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
     sharp = _scene((5, 5, 72, 72), seed=6)
     cp = np.array([[-0.6, 0.2, -0.3], [0.5, -0.3, 0.3]])
     blurred = simulate_blur(sharp, cp, n_times=32)
-    p = BlindParams().replace(n_control_points=2, path=dict(n_outer=2, steps=60), final={"n_iter": 20},
+    p = BlindParams().replace(n_control_points=2, path=dict(n_outer=2, steps=60, region=40), final={"n_iter": 20},
                               final_n_times=8)
     full = blind.estimate_blind_memory(blurred.shape, p)
     monkeypatch.setattr(devices, "free_memory", lambda device: full // 2)
@@ -680,15 +680,14 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
 
     res = run_to_completion(gen, collect)
     assert res.info["tile"][0] < 72 and any(s.startswith("final (tile 2/") for s in stages)
-    # the path-stage previews show the central crop where it is in the full frame, edge-padded around it
-    c = min(72, res.info["tile"][0] + 2 * _memory.TILE_MARGIN)
-    o = (72 - c) // 2
-    assert previews and 0 < o and o + c < 72
+    # the path-stage previews show the path's window where it is in the full frame, edge-padded around it
+    y0, x0, h, w = res.info["window"]
+    assert (h, w) == (40, 40) and previews
     for prev in previews:
-        np.testing.assert_array_equal(prev[:, :, :o], np.repeat(prev[:, :, o:o + 1], o, axis=2))
-        np.testing.assert_array_equal(prev[:, :, o + c:], np.repeat(prev[:, :, o + c - 1:o + c], 72 - o - c, axis=2))
-        np.testing.assert_array_equal(prev[:, :, :, :o], np.repeat(prev[:, :, :, o:o + 1], o, axis=3))
-        assert np.ptp(prev[:, :, o:o + c, o:o + c], axis=(2, 3)).min() > 0  # the crop itself is not padding
+        np.testing.assert_array_equal(prev[:, :, :y0], np.repeat(prev[:, :, y0:y0 + 1], y0, axis=2))
+        np.testing.assert_array_equal(prev[:, :, y0 + h:], np.repeat(prev[:, :, y0 + h - 1:y0 + h], 72 - y0 - h, axis=2))
+        np.testing.assert_array_equal(prev[:, :, :, :x0], np.repeat(prev[:, :, :, x0:x0 + 1], x0, axis=3))
+        assert np.ptp(prev[:, :, y0:y0 + h, x0:x0 + w], axis=(2, 3)).min() > 0  # the window itself is not padding
     assert res.lightfield.shape == blurred.shape and np.isfinite(res.lightfield).all()
     # the tiles, with their overlap, give nearly what one full-frame solve with that path gives
     ref = deconvolve(blurred, res.control_points, n_times=8, method="tv", weight=p.final.weight, n_iter=20, tol=0.0,

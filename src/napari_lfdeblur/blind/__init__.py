@@ -99,6 +99,7 @@ from ._disparity import gray, shear
 from ._evidence import blur_evidence, evidence_message
 from ._joint import iter_joint
 from ._memory import TILE_MARGIN, estimate_blind_memory, plan_tiles, tiles
+from ._region import choose_region, path_in_frame
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams
 
 #: why ``infinity_disparity='auto'`` is refused (docs/blind.md, "Where d_inf comes from")
@@ -322,14 +323,25 @@ def _preview(latent: torch.Tensor, fac: int, shape, unshear: float, offset=(0, 0
     return np.ascontiguousarray(out, dtype=np.float32)
 
 
-def _central_crop(arr, tile):
-    """The central crop (tile plus margins) the path is estimated on when working in tiles, and its offset."""
-    if tile is None:
-        return arr, (0, 0)
+def _path_window(arr, d_inf, p: BlindParams, dev, sheared):
+    """The grayscale light field the path is estimated on, and its window ``(y0, x0, h, w)`` in the view.
+
+    Refocused by ``d_inf`` when ``sheared`` (the path fit then uses the
+    ``d_inf = 0`` model); cut to :func:`~napari_lfdeblur.blind._region.choose_region`'s
+    window when the views are larger than ``p.path.region``.
+    """
     Y, X = arr.shape[2:4]
-    cy, cx = min(Y, tile[0] + 2 * TILE_MARGIN), min(X, tile[1] + 2 * TILE_MARGIN)
-    offset = ((Y - cy) // 2, (X - cx) // 2)
-    return arr[:, :, offset[0] : offset[0] + cy, offset[1] : offset[1] + cx], offset
+    f = torch.as_tensor(np.ascontiguousarray(arr), dtype=torch.float32, device=dev)
+    g = gray(f if arr.ndim == 5 else f.unsqueeze(-1)).contiguous()
+    del f
+    if sheared:
+        g = shear(g, d_inf)
+    size = p.path.region
+    if not size or (Y <= size and X <= size):
+        return g, (0, 0, Y, X)
+    window = choose_region(g, size, p.path.disparity_weight)
+    y0, x0, h, w = window
+    return g[:, :, y0 : y0 + h, x0 : x0 + w].contiguous(), window
 
 
 def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
@@ -338,40 +350,31 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     rng = np.random.default_rng(seed)
     V, U, Y, X = arr.shape[:4]
     box = p.max_extent if p.max_extent > 0 else max(0.5, 0.35 * (min(V, U) - 1))
-    crop, offset = _central_crop(arr, tile)  # the path is the same everywhere
-    f = torch.as_tensor(np.ascontiguousarray(crop), dtype=torch.float32, device=dev)
-    if arr.ndim == 4:
-        f = f.unsqueeze(-1)
-    g = gray(f).contiguous()
     sheared = p.method == "alternating" and d_inf != 0.0
+    g, window = _path_window(arr, d_inf, p, dev, sheared)  # the path is the same everywhere
 
     def preview(latent, fac):
-        return _preview(latent, fac, arr.shape, d_inf if sheared else 0.0, offset)
+        return _preview(latent, fac, arr.shape, d_inf if sheared else 0.0, window[:2])
 
     if p.method == "alternating":
-        if sheared:
-            g = shear(g, d_inf)  # the path fit then uses the d_inf = 0 model
         est = yield from iter_alternating(g, p, dev, rng, box, preview)
     else:
         est = yield from iter_joint(g, d_inf, p, dev, rng, box, preview)
-    info = {"device": str(dev), "box": box, **est.info}
-    info["levels"] = [(crop.shape[2] // k, crop.shape[3] // k) for k in est.factors]
+    info = {"device": str(dev), "box": box, "window": window, **est.info}
+    info["levels"] = [(g.shape[2] // k, g.shape[3] // k) for k in est.factors]
     evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev)
     info.update(blur_found=evidence["blur_found"], evidence=evidence,
                 message=evidence_message(evidence, p.require_evidence))
     restore = evidence["blur_found"] or not p.require_evidence
-    cp = est.control_points
+    cp = path_in_frame(est.control_points, window, (Y, X))  # the window's x~ -> the frame's
     if not restore:  # the path estimated, kept for inspection; the result has no blur
         info["rejected_path"] = canonical_time_direction(center_path(cp, p.n_times))
         cp = np.zeros_like(cp)
-    if crop is not arr:
-        # p_z in the crop's normalised coordinates -> the full frame's (x~ scales by r_crop / r_full)
-        cp = np.array(cp, dtype=np.float64)
-        cp[:, 2] *= max(Y, X) / max(crop.shape[2], crop.shape[3])
+    if tile is not None:
         info["tile"] = tuple(tile)
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
-    del g, f
+    del g
     if p.final is not None and restore:
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages)
     else:

@@ -16,8 +16,9 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     """A rough upper estimate of the peak memory of blind deblurring, in bytes.
 
     Counts the light-field-sized float32 tensors alive at once in the final
-    (colour) TV stage and in the grayscale path stage, plus the blur
-    operator's blocks and interpolation tables.
+    (colour) TV stage and in the grayscale path stage (on its window of
+    ``params.path.region`` px), plus the blur operator's blocks and
+    interpolation tables.
 
     Parameters
     ----------
@@ -34,7 +35,11 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     C = shape[4] if len(shape) == 5 else 1
     n = V * U * Y * X
     final = n * C * 4 * 12  # f, x, x_new, residual, gradient, 4 dual fields, temporaries
-    path = n * 4 * 16  # f, latent, CG vectors, gradients and autograd buffers (grayscale)
+    r = p.path.region
+    ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
+    # the full-size input and its grayscale (and refocused) copies, then the window's path stage:
+    # f, latent, CG vectors, gradients and autograd buffers (grayscale)
+    path = n * C * 4 + n * 4 * 2 + V * U * ny * nx * 4 * 16
     tables = 4 * max(p.n_times, p.final_n_times) * (X * U * U + Y * V * V) * 2
     blocks = 4 * (1 << 22) * 3
     return int(max(final, path) + tables + blocks + 64 * 2**20)

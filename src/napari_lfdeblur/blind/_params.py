@@ -102,6 +102,12 @@ class PathFitParams(JsonParams):
 
     Attributes
     ----------
+    region : int
+        On views larger than ``region x region`` px, the path is estimated on
+        the window of that size that conditions the fit best (edges in two
+        directions, disparity away from ``d_inf``; docs/blind.md) and used
+        for the whole light field, so that its cost does not grow with the
+        capture (0: on the whole view).
     n_levels : int
         Spatial pyramid levels (1 = full resolution only). Levels smaller
         than ``min_size`` px are skipped.
@@ -170,6 +176,7 @@ class PathFitParams(JsonParams):
         motions.
     """
 
+    region: int = 128
     n_levels: int = 1
     min_size: int = 24
     max_size: int = 0
@@ -195,11 +202,14 @@ class PathFitParams(JsonParams):
     _what = "blind path fit"
 
     def __post_init__(self):
-        ints = {"n_levels": 1, "min_size": 4, "max_size": 0, "n_outer": 1, "n_restarts": 1, "steps": 1,
+        ints = {"region": 0, "n_levels": 1, "min_size": 4, "max_size": 0, "n_outer": 1, "n_restarts": 1, "steps": 1,
                 "n_pixels": 16, "n_random": 0, "n_random_later": 0, "n_perturb": 0, "tiles": 1, "z_outer": 0}
         _check(self, "BlindParams.path", ints=ints,
                nonneg=("init_length", "tol", "robust", "perturb", "disparity_weight", "z_box"),
                positive=("lr",), bools=("try_mirror", "estimate_z"))
+        if 0 < self.region < self.min_size:
+            raise ValueError(f"BlindParams.path.region must be 0 or at least min_size = {self.min_size} px; "
+                             f"got {self.region}")
 
 
 @dataclass(frozen=True)

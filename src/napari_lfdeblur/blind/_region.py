@@ -1,0 +1,127 @@
+"""Where the path is estimated on a large light field: the window that conditions the fit best.
+
+The camera path is one for the whole light field, so it can be estimated on
+part of it and used everywhere. The path fit needs two things of its pixels:
+edges in more than one direction (an edge constrains the blur only across
+itself, so a window of parallel edges leaves the path's component along them
+free), and disparity away from the infinity disparity (the blur of a point
+scales with ``|d - d_inf|``: points at infinity are not blurred by a
+translation at all). :func:`choose_region` scores every window by the sum,
+over its pixels, of the smaller eigenvalue of the centre view's structure
+tensor (large only where the gradients span two directions; Shi & Tomasi,
+1994) times the fit's own disparity weight, and picks the best.
+
+:func:`path_in_frame` carries a path estimated on a window over to the full
+frame: ``x~`` is normalised by the frame's size and centred on its centre,
+so the window's ``p_z`` is rescaled and its off-centre position turns part of
+``p_z`` into ``p_x, p_y``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+from ._disparity import disparity_weights
+
+__all__ = ["choose_region", "path_in_frame", "region_score", "STRUCTURE_SIGMA"]
+
+#: Gaussian (px) integrating the structure tensor
+STRUCTURE_SIGMA = 2.0
+
+
+def region_score(g: torch.Tensor, disparity_power: float) -> np.ndarray:
+    """Per-pixel score of the path fit's conditioning, (Y, X) float64.
+
+    Parameters
+    ----------
+    g : torch.Tensor, shape (V, U, Y, X, 1)
+        Grayscale light field in the ``d_inf = 0`` model (refocused by ``d_inf``).
+    disparity_power : float
+        The fit's ``disparity_weight``; 0 scores the edges alone.
+
+    Returns
+    -------
+    ndarray, float64, shape (Y, X)
+        Smaller eigenvalue of the centre view's structure tensor, times the
+        disparity weight of :func:`~napari_lfdeblur.blind._disparity.disparity_weights`.
+    """
+    V, U = g.shape[:2]
+    c = g[V // 2, U // 2, :, :, 0].detach().cpu().double().numpy()
+    gy, gx = np.gradient(c)
+    jxx = ndimage.gaussian_filter(gx * gx, STRUCTURE_SIGMA)
+    jyy = ndimage.gaussian_filter(gy * gy, STRUCTURE_SIGMA)
+    jxy = ndimage.gaussian_filter(gx * gy, STRUCTURE_SIGMA)
+    lam_min = 0.5 * (jxx + jyy) - np.sqrt(0.25 * (jxx - jyy) ** 2 + jxy**2)
+    score = np.maximum(lam_min, 0.0)
+    if disparity_power > 0:
+        score = score * disparity_weights(g, disparity_power)
+    return score
+
+
+def choose_region(g: torch.Tensor, size: int, disparity_power: float) -> tuple[int, int, int, int]:
+    """The ``size x size`` window (clipped to the view) with the largest total :func:`region_score`.
+
+    Candidate corners lie on a grid of step ``max(1, size // 8)`` px, the last
+    one flush with the far edge.
+
+    Parameters
+    ----------
+    g : torch.Tensor, shape (V, U, Y, X, 1)
+    size : int
+        Window side, px (>= 1).
+    disparity_power : float
+
+    Returns
+    -------
+    y0, x0, height, width : int
+        The window, inside the view.
+    """
+    Y, X = g.shape[2:4]
+    h, w = min(size, Y), min(size, X)
+    if (h, w) == (Y, X):
+        return 0, 0, Y, X
+    s = region_score(g, disparity_power)
+    integral = np.zeros((Y + 1, X + 1))
+    integral[1:, 1:] = s.cumsum(axis=0).cumsum(axis=1)
+    step = max(1, size // 8)
+    ys = np.unique(np.r_[np.arange(0, Y - h + 1, step), Y - h])
+    xs = np.unique(np.r_[np.arange(0, X - w + 1, step), X - w])
+    total = (integral[ys[:, None] + h, xs[None, :] + w] - integral[ys[:, None], xs[None, :] + w]
+             - integral[ys[:, None] + h, xs[None, :]] + integral[ys[:, None], xs[None, :]])
+    i, j = np.unravel_index(int(np.argmax(total)), total.shape)
+    return int(ys[i]), int(xs[j]), h, w
+
+
+def path_in_frame(cp, window, frame_shape) -> np.ndarray:
+    """A path estimated on a window, in the full frame's coordinates.
+
+    With ``x~ = (x - (X - 1) / 2) / R``, ``R = max(Y, X) / 2``, taken in the
+    window (``x~_w``, ``R_w``) and in the frame (``x~``, ``R``): ``x~ = rho
+    x~_w + delta_x`` with ``rho = R_w / R`` and ``delta_x`` the window
+    centre's ``x~`` in the frame. The model's ``p_x - x~ p_z`` is then the
+    window's ``p_x' - x~_w p_z'`` with ``p_z' = rho p_z`` and ``p_x' = p_x -
+    delta_x p_z`` (likewise ``y``), which this inverts.
+
+    Parameters
+    ----------
+    cp : array_like, shape (n, 3)
+        Control points found on the window.
+    window : tuple of 4 int
+        ``(y0, x0, height, width)`` of the window in the frame.
+    frame_shape : tuple of 2 int
+        ``(Y, X)`` of the frame.
+
+    Returns
+    -------
+    ndarray, float64, shape (n, 3)
+    """
+    cp = np.array(cp, dtype=np.float64)
+    y0, x0, h, w = window
+    Y, X = frame_shape
+    R, R_w = max(Y, X) / 2.0, max(h, w) / 2.0
+    dy = (y0 + (h - 1) / 2.0 - (Y - 1) / 2.0) / R
+    dx = (x0 + (w - 1) / 2.0 - (X - 1) / 2.0) / R
+    pz = cp[:, 2] * R / R_w
+    return np.stack([cp[:, 0] + dx * pz, cp[:, 1] + dy * pz, pz], axis=1)

@@ -1,0 +1,90 @@
+"""The path window of large light fields: its choice, the path carried to the full frame, the pipeline."""
+
+import numpy as np
+import pytest
+import torch
+
+from napari_lfdeblur.blind import BlindParams, blind_deblur
+from napari_lfdeblur.blind._region import choose_region, path_in_frame
+from napari_lfdeblur.blur import simulate_blur
+from napari_lfdeblur.path import bezier_positions, center_path
+from napari_lfdeblur.samples import synthetic_scene
+
+
+@pytest.mark.parametrize("window", [(0, 0, 24, 24), (20, 31, 24, 30), (36, 5, 28, 20)])
+@pytest.mark.parametrize("d_inf", [0.0, 0.5])
+def test_a_path_found_on_a_window_blurs_the_frame_as_it_blurred_the_window(window, d_inf):
+    # independent expectation: the blur operator on the whole frame, cut to the window
+    rng = np.random.default_rng(1)
+    lf = rng.random((5, 5, 64, 72)).astype(np.float32)
+    cp_window = np.array([[-0.7, 0.3, 0.9], [0.4, -0.5, -0.6], [0.6, 0.6, 0.4]])
+    y0, x0, h, w = window
+    on_window = simulate_blur(lf[:, :, y0:y0 + h, x0:x0 + w], cp_window, n_times=16, infinity_disparity=d_inf)
+    on_frame = simulate_blur(lf, path_in_frame(cp_window, window, (64, 72)), n_times=16,
+                             infinity_disparity=d_inf)[:, :, y0:y0 + h, x0:x0 + w]
+    # d_inf = 0: the blur is per pixel (over the views), exact everywhere; d_inf != 0 moves samples
+    # spatially, so the window's replicate border differs from the frame's pixels there
+    m = 0 if d_inf == 0 else 3
+    inner = (slice(None), slice(None), slice(m, h - m), slice(m, w - m))
+    np.testing.assert_allclose(on_window[inner], on_frame[inner], atol=2e-6)
+    assert np.abs(on_window - simulate_blur(lf, cp_window, n_times=16, infinity_disparity=d_inf)[
+        :, :, y0:y0 + h, x0:x0 + w]).max() > 1e-2 or window[2:] == (64, 72)  # the conversion mattered
+
+
+def test_the_whole_frame_as_window_leaves_the_path_unchanged():
+    cp = np.array([[-0.7, 0.3, 0.9], [0.4, -0.5, -0.6]])
+    np.testing.assert_allclose(path_in_frame(cp, (0, 0, 40, 50), (40, 50)), cp)
+
+
+def _textured_lf(texture, at, shape=(3, 3, 96, 96)):
+    """A flat grey light field (no disparity: every view the same) with ``texture`` pasted at ``at``."""
+    img = np.full(shape[2:], 0.5)
+    (y, x), (h, w) = at, texture.shape
+    img[y:y + h, x:x + w] = texture
+    lf = np.broadcast_to(img, shape).astype(np.float32)
+    return torch.as_tensor(np.ascontiguousarray(lf))[..., None]
+
+
+def test_choose_region_finds_the_only_textured_patch():
+    tex = np.random.default_rng(2).random((24, 24))
+    g = _textured_lf(tex, (60, 10))
+    y0, x0, h, w = choose_region(g, 32, disparity_power=0.0)
+    assert (h, w) == (32, 32)
+    assert y0 <= 60 and y0 + 32 >= 84 and x0 <= 10 and x0 + 32 >= 34
+
+
+def test_choose_region_prefers_edges_in_two_directions_to_parallel_stripes():
+    # stripes along x constrain the blur across them only; a checkerboard of the same contrast in both
+    yy, xx = np.mgrid[:32, :32]
+    stripes = 0.5 + 0.4 * np.sign(np.sin(yy * np.pi / 4))
+    checks = 0.5 + 0.4 * np.sign(np.sin(yy * np.pi / 4)) * np.sign(np.sin(xx * np.pi / 4))
+    img = np.full((96, 160), 0.5)
+    img[10:42, 10:42] = stripes
+    img[50:82, 110:142] = checks
+    g = torch.as_tensor(np.broadcast_to(img, (3, 3, 96, 160)).astype(np.float32).copy())[..., None]
+    y0, x0, _, _ = choose_region(g, 40, disparity_power=0.0)
+    assert 40 <= y0 <= 52 and 100 <= x0 <= 112
+
+
+def test_blind_on_a_large_view_estimates_the_path_on_a_window_and_restores_the_whole():
+    sharp, _ = synthetic_scene((5, 5, 96, 128), seed=3)
+    cp = np.array([[-0.8, 0.3, 0.4], [0.2, -0.6, -0.3], [0.7, 0.5, 0.2]])
+    blurred = simulate_blur(sharp, cp, n_times=32)
+    quick = dict(path=dict(n_outer=3, steps=100, n_random=100, n_random_later=40, z_outer=1), final={"n_iter": 30},
+                 final_n_times=16, require_evidence=False, n_control_points=3)
+    windowed = blind_deblur(blurred, params=BlindParams().replace(**quick).replace(path={"region": 48}),
+                            device="cpu", seed=0)
+    y0, x0, h, w = windowed.info["window"]
+    assert (h, w) == (48, 48)
+    # the same pipeline on the window alone (the crop pipeline), carried to the frame
+    crop = blind_deblur(blurred[:, :, y0:y0 + h, x0:x0 + w], params=BlindParams().replace(**quick), device="cpu",
+                        seed=0)
+    frame = center_path(path_in_frame(crop.control_points, (y0, x0, h, w), (96, 128)), 32)
+    T = 32
+    pos = bezier_positions(center_path(windowed.control_points, T), T)
+    np.testing.assert_allclose(pos, bezier_positions(frame, T), atol=1e-6)
+    # and the path is near the true one, so the whole frame is restored
+    truth = bezier_positions(center_path(cp, T), T)
+    assert np.abs(pos - truth).max() < 0.5  # measured 0.34 (the path spans about 1.6 views)
+    err_in, err_out = np.abs(blurred - sharp).mean(), np.abs(windowed.lightfield - sharp).mean()
+    assert windowed.lightfield.shape == sharp.shape and err_out < 0.7 * err_in
