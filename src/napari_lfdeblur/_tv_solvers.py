@@ -14,7 +14,7 @@ import math
 import numpy as np
 import torch
 
-from .priors import divergence4d, gradient_norm_bound, project_tv_dual
+from .priors import gradient_norm_bound
 
 __all__ = ["TVProx", "add_gradient_", "tv_value", "iter_fista_tv", "estimate_noise_sigma"]
 
@@ -30,22 +30,42 @@ def add_gradient_(Y, x, alpha: float, axis_weights) -> None:
         y.add_(hi, alpha=alpha * axis_weights[axis]).sub_(lo, alpha=alpha * axis_weights[axis])
 
 
-def tv_value(x, isotropic, axis_weights) -> float:
-    """``TV4(x)`` without materialising the four gradient components at once."""
-    acc = torch.zeros_like(x) if isotropic else None
+def tv_value(x, isotropic, axis_weights, buffers=None) -> float:
+    """``TV4(x)`` without materialising the four gradient components at once.
+
+    ``buffers``, two tensors of ``x``'s shape, are used as scratch space
+    instead of new allocations (large fresh tensors cost page faults on every
+    use on the CPU).
+    """
+    acc, diff_buf = buffers if buffers is not None else (torch.empty_like(x), torch.empty_like(x))
+    if isotropic:
+        acc.zero_()
     total = 0.0
     for axis in range(4):
         n = x.shape[axis]
         if n < 2 or axis_weights[axis] == 0:
             continue
-        diff = x.narrow(axis, 1, n - 1) - x.narrow(axis, 0, n - 1)
+        diff = torch.sub(x.narrow(axis, 1, n - 1), x.narrow(axis, 0, n - 1), out=diff_buf.narrow(axis, 0, n - 1))
         if axis_weights[axis] != 1.0:
             diff.mul_(axis_weights[axis])
         if isotropic:
             acc.narrow(axis, 0, n - 1).addcmul_(diff, diff)
         else:
-            total += float(diff.abs().sum())
+            total += float(diff.abs_().sum())
     return float(acc.sqrt_().sum()) if isotropic else total
+
+
+def _divergence_into(out, q, axis_weights):
+    """``out = div q`` (the negative adjoint of the forward differences), in place."""
+    out.zero_()
+    for axis in range(4):
+        n = out.shape[axis]
+        if n < 2 or axis_weights[axis] == 0:
+            continue
+        last = q[axis].narrow(axis, 0, n - 1)
+        out.narrow(axis, 0, n - 1).add_(last, alpha=axis_weights[axis])
+        out.narrow(axis, 1, n - 1).sub_(last, alpha=axis_weights[axis])
+    return out
 
 
 class TVProx:
@@ -53,7 +73,8 @@ class TVProx:
 
     The dual field (one component per axis, in the unit ball) is kept between
     calls, so each call starts from the previous solution: with the slowly
-    moving ``v`` of an outer iteration a few inner iterations suffice.
+    moving ``v`` of an outer iteration a few inner iterations suffice. All
+    work happens in buffers allocated once; ``out`` receives the result.
     """
 
     def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box):
@@ -63,35 +84,52 @@ class TVProx:
         self.box = box
         self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
         self.p = [torch.zeros_like(like) for _ in range(4)]
+        self.r = [torch.empty_like(like) for _ in range(4)]
+        self.x = torch.empty_like(like)
+        self.norm = torch.empty_like(like) if isotropic else None
 
-    def _primal(self, v, mu, q):
-        x = divergence4d(q, self.aw).mul_(mu).add_(v)
+    def _primal(self, v, mu, q, out):
+        x = _divergence_into(out, q, self.aw).mul_(mu).add_(v)
         return x if self.box is None else x.clamp_(*self.box)
 
-    def __call__(self, v: torch.Tensor, mu: float) -> torch.Tensor:
+    def _project(self, r):
+        """Scale each sample's dual 4-vector into the unit ball (isotropic) or clip it (anisotropic), in place."""
+        if not self.isotropic:
+            for q in r:
+                q.clamp_(-1.0, 1.0)
+            return
+        norm = torch.mul(r[0], r[0], out=self.norm)
+        for q in r[1:]:
+            norm.addcmul_(q, q)
+        norm.sqrt_().clamp_(min=1.0)
+        for q in r:
+            q.div_(norm)
+
+    def __call__(self, v: torch.Tensor, mu: float, out: torch.Tensor) -> torch.Tensor:
         if mu <= 0:
-            return v.clone() if self.box is None else v.clamp(*self.box)
-        p = self.p
-        r = [q.clone() for q in p]
+            out.copy_(v)
+            return out if self.box is None else out.clamp_(*self.box)
+        p, r = self.p, self.r
+        for a in range(4):
+            r[a].copy_(p[a])
         t = 1.0
         step = 1.0 / (mu * self.lip)
         for _ in range(self.n_inner):
-            add_gradient_(r, self._primal(v, mu, r), step, self.aw)  # r <- p_new (in place)
-            project_tv_dual(r, 1.0, self.isotropic)
+            add_gradient_(r, self._primal(v, mu, r, self.x), step, self.aw)  # r <- p_new (in place)
+            self._project(r)
             t_new = (1.0 + math.sqrt(1.0 + 4.0 * t * t)) / 2.0
             beta = (t - 1.0) / t_new
             for a in range(4):  # p <- p_new + beta (p_new - p); swap so that r holds the extrapolation
                 p[a].sub_(r[a]).mul_(-beta).add_(r[a])
             p, r = r, p
             t = t_new
-        self.p = p
-        return self._primal(v, mu, p)
+        self.p, self.r = p, r
+        return self._primal(v, mu, p, out)
 
 
-def _objective(x, Kx, f, weight, isotropic, axis_weights):
-    """``(1/2 ||K x - f||^2 + w TV4(x), data term)`` from a precomputed ``K x``."""
-    data = 0.5 * float(torch.linalg.vector_norm(Kx - f)) ** 2
-    return data + (weight * tv_value(x, isotropic, axis_weights) if weight > 0 else 0.0), data
+def _dist2(a, b, buf) -> float:
+    """``||a - b||^2``, with ``buf`` as scratch."""
+    return float(torch.linalg.vector_norm(torch.sub(a, b, out=buf))) ** 2
 
 
 @torch.no_grad()
@@ -105,41 +143,61 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
     step is then redone), which costs no extra blur evaluation when the
     estimate holds. Stops after ``n_iter`` iterations or when the objective
     decreased by less than ``tol`` times its value.
+
+    The iterates live in buffers allocated once and reused: the ``x`` of a
+    record is overwritten two iterations later (copy it to keep it).
     """
     x = x0.clone() if box is None else x0.clamp(*box)
+    x_new, y, work, spare = (torch.empty_like(x) for _ in range(4))
     Kx = op.forward(x)
+    Ky, kwork = Kx.clone(), torch.empty_like(Kx)
+    y.copy_(x)
     prox = TVProx(x, n_inner, isotropic, axis_weights, box)
-    F, _ = _objective(x, Kx, f, weight, isotropic, axis_weights)
-    y, Ky, t = x, Kx, 1.0
+    scratch = (work, spare)
+    F = _objective(x, Kx, f, weight, isotropic, axis_weights, kwork, scratch)[0]
+    t = 1.0
     restarts = evaluations = 0
     for it in range(1, n_iter + 1):
-        grad = op.adjoint(Ky - f)
+        grad = op.adjoint(torch.sub(Ky, f, out=kwork))
         evaluations += 1
         while True:  # backtracking on the Lipschitz estimate (Beck & Teboulle)
-            x_new = prox(torch.add(y, grad, alpha=-1.0 / lip), weight / lip)
+            prox(torch.add(y, grad, alpha=-1.0 / lip, out=work), weight / lip, x_new)
             Kx_new = op.forward(x_new)
-            d2 = float(torch.linalg.vector_norm(x_new - y)) ** 2
-            curv = float(torch.linalg.vector_norm(Kx_new - Ky)) ** 2 / max(d2, 1e-30)
+            d2 = _dist2(x_new, y, work)
+            curv = _dist2(Kx_new, Ky, kwork) / max(d2, 1e-30)
             if curv <= lip * (1.0 + 1e-6) or d2 == 0.0:
                 break
             lip = 1.1 * curv
         del grad
-        F_new, data = _objective(x_new, Kx_new, f, weight, isotropic, axis_weights)
+        F_new, data = _objective(x_new, Kx_new, f, weight, isotropic, axis_weights, kwork, scratch)
+        step = torch.sub(x_new, x, out=work)  # x_new - x
         # adaptive restart: momentum is dropped when the objective rose or the step turned back
-        if it > 1 and (F_new > F or float(((y - x_new) * (x_new - x)).sum()) > 0):
+        if it > 1 and (F_new > F or float(torch.vdot(torch.sub(y, x_new, out=spare).view(-1), step.view(-1))) > 0):
             t, restarts = 1.0, restarts + 1
         t_new = (1.0 + math.sqrt(1.0 + 4.0 * t * t)) / 2.0
         beta = (t - 1.0) / t_new
-        y = torch.add(x_new, x_new - x, alpha=beta) if beta > 0 else x_new
-        Ky = torch.add(Kx_new, Kx_new - Kx, alpha=beta) if beta > 0 else Kx_new
+        y.copy_(x_new)
+        torch.sub(Kx_new, Kx, out=Ky)
+        if beta > 0:
+            y.add_(step, alpha=beta)
+            Ky.mul_(beta).add_(Kx_new)
+        else:
+            Ky.copy_(Kx_new)
         decrease = (F - F_new) / max(abs(F_new), 1e-30)
-        x, Kx, F, t = x_new, Kx_new, F_new, t_new
+        x, x_new = x_new, x  # the old x's buffer takes the next iterate
+        Kx, F, t = Kx_new, F_new, t_new
         info = {"objective": F, "data_term": data, "relative_decrease": decrease, "lipschitz": lip,
                 "restarts": restarts, "blur_evaluations": evaluations}
         yield (it, x, info) if record is None else record(it, x, info)
         if 0.0 <= decrease < tol:
             break
     return x
+
+
+def _objective(x, Kx, f, weight, isotropic, axis_weights, kbuf, scratch):
+    """``(1/2 ||K x - f||^2 + w TV4(x), data term)`` from a precomputed ``K x``; ``kbuf``, ``scratch``: buffers."""
+    data = 0.5 * _dist2(Kx, f, kbuf)
+    return data + (weight * tv_value(x, isotropic, axis_weights, scratch) if weight > 0 else 0.0), data
 
 
 def estimate_noise_sigma(lf: np.ndarray) -> float:
