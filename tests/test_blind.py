@@ -378,7 +378,7 @@ def test_replace_merges_a_dict_into_the_current_sub_params_or_takes_an_instance(
     q = p.replace(n_control_points=5, latent={"edge_sigma": 0.3}, final={"n_iter": 50})
     assert q.n_control_points == 5
     assert q.latent == LatentParams(edge_anisotropy=0.6, n_cg=2, edge_sigma=0.3)  # merged into p's latent
-    assert q.final == DeconvolutionParams(method="tv", weight=0.002, n_iter=50, tol=0.0)
+    assert q.final == DeconvolutionParams(method="tv", n_iter=50)
     assert q.path == p.path and q.joint == p.joint
     assert p.replace(joint=JointParams(n_iter=3)).joint == JointParams(n_iter=3)
     # final = None skips the final stage; a dict then starts from the default final stage
@@ -665,7 +665,7 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
     sharp = _scene((5, 5, 72, 72), seed=6)
     cp = np.array([[-0.6, 0.2, -0.3], [0.5, -0.3, 0.3]])
     blurred = simulate_blur(sharp, cp, n_times=32)
-    p = BlindParams().replace(n_control_points=2, path=dict(n_outer=2, steps=60, region=40), final={"n_iter": 20},
+    p = BlindParams().replace(n_control_points=2, path=dict(n_outer=2, steps=60, region=40), final={"n_iter": 20, "tol": 0.0},
                               final_n_times=8)
     full = blind.estimate_blind_memory(blurred.shape, p)
     monkeypatch.setattr(devices, "free_memory", lambda device: full // 2)
@@ -690,8 +690,7 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
         assert np.ptp(prev[:, :, y0:y0 + h, x0:x0 + w], axis=(2, 3)).min() > 0  # the window itself is not padding
     assert res.lightfield.shape == blurred.shape and np.isfinite(res.lightfield).all()
     # the tiles, with their overlap, give nearly what one full-frame solve with that path gives
-    ref = deconvolve(blurred, res.control_points, n_times=8, method="tv", weight=p.final.weight, n_iter=20, tol=0.0,
-                     device="cpu")
+    ref = deconvolve(blurred, res.control_points, n_times=8, method="tv", n_iter=20, tol=0.0, device="cpu")
     assert np.abs(res.lightfield - ref).max() < 2e-3
 
 

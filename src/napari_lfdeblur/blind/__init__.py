@@ -402,9 +402,13 @@ def _iter_evidence(g, est, p: BlindParams, dev):
 
 def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
     """The final non-blind stage, all channels at once (tile by tile when memory is short)."""
-    from ..deconvolution import iter_deconvolve
+    from ..deconvolution import estimate_noise_sigma, iter_deconvolve
 
     Y, X = arr.shape[2:4]
+    final = p.final
+    if final.weight is None:  # one weight for the whole light field, so that tiles agree
+        method = "inplane" if final.method == "inplane" else "tv"
+        final = final.replace(weight=final.effective_weight(method, estimate_noise_sigma(arr)))
     if tile is None:
         parts = [((slice(None), slice(None)), (slice(None), slice(None)))]
         out = None
@@ -412,11 +416,11 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
         reach = float(np.abs(bezier_positions(cp, p.final_n_times)).sum(axis=1).max())  # |p_x| + |p_y| + |p_z|
         parts = list(tiles(Y, X, tile, TILE_MARGIN + int(math.ceil(abs(d_inf) * reach))))
         out = np.array(arr, dtype=np.float32)  # restored tile by tile; the rest shows as blurred meanwhile
-    n_iter = p.final.n_iter
+    n_iter = final.n_iter
     for i, (core, pad) in enumerate(parts):
         y0, x0 = pad[0].start or 0, pad[1].start or 0
         gen = iter_deconvolve(arr[:, :, pad[0], pad[1]], cp, n_times=p.final_n_times, infinity_disparity=d_inf,
-                              device=dev, params=p.final, frame=None if tile is None else (y0, x0, Y, X))
+                              device=dev, params=final, frame=None if tile is None else (y0, x0, Y, X))
         inner = None
         if tile is not None:
             inner = (slice(core[0].start - y0, core[0].stop - y0), slice(core[1].start - x0, core[1].stop - x0))

@@ -250,7 +250,7 @@ class JointParams(JsonParams):
 
 
 def _default_final() -> DeconvolutionParams:
-    return DeconvolutionParams(method="tv", weight=0.002, n_iter=100, tol=0.0)
+    return DeconvolutionParams(method="tv")  # weight from the noise, stops on the objective
 
 
 _NESTED = {"latent": LatentParams, "path": PathFitParams, "joint": JointParams}
