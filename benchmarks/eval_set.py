@@ -164,7 +164,8 @@ def capture_available(group: str) -> bool:
 
 
 @functools.lru_cache(maxsize=2)
-def _capture(group: str) -> np.ndarray:
+def capture(group: str) -> np.ndarray:
+    """The whole capture of ``group`` (``"F01"``: views 2..10 of both axes; ``"Illum"``), float32."""
     from napari_lfdeblur import read_lightfield
 
     if group == "F01":  # views 2..10 of the 10 x 10, horizontal index first in the names
@@ -181,7 +182,7 @@ def sharp_lightfield(spec: CaseSpec, quick: bool = False) -> np.ndarray:
         lf, _ = procedural_scene((V, U, Y, X), seed=spec.scene[1], infinity_disparity=spec.infinity_disparity)
         return lf
     y0, x0 = spec.scene[1:]
-    lf = _capture(spec.group)
+    lf = capture(spec.group)
     a, b = (lf.shape[0] - V) // 2, (lf.shape[1] - U) // 2
     return np.ascontiguousarray(lf[a : a + V, b : b + U, y0 : y0 + Y, x0 : x0 + X], dtype=np.float32)
 
