@@ -1,5 +1,10 @@
 """The path window of large light fields: its choice, the path carried to the full frame, the pipeline."""
 
+import json
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 import torch
@@ -88,3 +93,51 @@ def test_blind_on_a_large_view_estimates_the_path_on_a_window_and_restores_the_w
     assert np.abs(pos - truth).max() < 0.5  # measured 0.34 (the path spans about 1.6 views)
     err_in, err_out = np.abs(blurred - sharp).mean(), np.abs(windowed.lightfield - sharp).mean()
     assert windowed.lightfield.shape == sharp.shape and err_out < 0.7 * err_in
+
+
+_PEAK_SCRIPT = r"""
+import json, os, sys, threading
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+from napari_lfdeblur.blind import BlindParams, blind_deblur, estimate_blind_memory
+from napari_lfdeblur.blur import simulate_blur
+
+page = os.sysconf("SC_PAGE_SIZE")
+
+def rss():
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * page
+
+shape = (5, 5, 224, 224, 3)
+lf = np.random.default_rng(0).random(shape, dtype=np.float32)
+blurred = simulate_blur(lf, [[-0.6, 0.2, -0.3], [0.5, -0.3, 0.3]], n_times=8)
+del lf
+p = BlindParams().replace(n_control_points=2, final_n_times=8, require_evidence=False, final={"n_iter": 3, "tol": 0.0},
+                          path=dict(n_outer=1, steps=20, n_random=20, n_random_later=5, z_outer=1, region=32))
+base = rss()
+peak, stop = [base], threading.Event()
+
+def sample():
+    while not stop.wait(0.003):
+        peak[0] = max(peak[0], rss())
+
+thread = threading.Thread(target=sample, daemon=True)
+thread.start()
+blind_deblur(blurred, params=p, device="cpu")
+stop.set()
+thread.join()
+print(json.dumps({"measured": max(peak[0], rss()) - base, "estimate": estimate_blind_memory(shape, p)}))
+"""
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/statm"), reason="reads the resident set size from /proc")
+def test_the_memory_estimate_is_within_30_percent_of_the_measured_peak():
+    # a fresh process, so that nothing else's memory counts; the resident set size sampled every 3 ms
+    out = subprocess.run([sys.executable, "-c", _PEAK_SCRIPT], capture_output=True, text=True, check=True,
+                         env={**os.environ, "OMP_NUM_THREADS": "2"})
+    m = json.loads(out.stdout.strip().splitlines()[-1])
+    assert abs(m["estimate"] - m["measured"]) <= 0.3 * m["measured"], m

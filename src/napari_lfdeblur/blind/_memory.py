@@ -4,16 +4,18 @@ from __future__ import annotations
 
 from ._params import BlindParams
 
-__all__ = ["estimate_blind_memory", "plan_tiles", "tiles", "TILE_MARGIN", "MIN_TILE"]
+__all__ = ["estimate_blind_memory", "plan_tiles", "tiles", "TILE_MARGIN", "MIN_TILE", "FINAL_TENSORS"]
 
 #: overlap (px) of neighbouring tiles in the final stage, on top of what ``d_inf`` shifts
 TILE_MARGIN = 12
 #: smallest tile side (px) worth working on
 MIN_TILE = 32
+#: input-sized float32 tensors alive at once in the final stage (see estimate_blind_memory)
+FINAL_TENSORS = 21
 
 
 def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
-    """A rough upper estimate of the peak memory of blind deblurring, in bytes.
+    """An estimate of the peak memory of blind deblurring, in bytes.
 
     Counts the light-field-sized float32 tensors alive at once in the final
     (colour) TV stage and in the grayscale path stage (on its window of
@@ -34,7 +36,10 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     V, U, Y, X = shape[:4]
     C = shape[4] if len(shape) == 5 else 1
     n = V * U * Y * X
-    final = n * C * 4 * 12  # f, x, x_new, residual, gradient, 4 dual fields, temporaries
+    # the final stage's float32 tensors of the input's size: FISTA's iterates x, x_new, y and two
+    # scratch buffers, K x, K y, K x_new, the residual and the gradient (10); the TV prox's dual field
+    # and its extrapolation (4 + 4), its primal and the dual norm (2); the result's copy (1)
+    final = n * C * 4 * FINAL_TENSORS
     r = p.path.region
     ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
     # the full-size input and its grayscale (and refocused) copies, then the window's path stage:
