@@ -118,14 +118,18 @@ def test_tv_colour_and_early_stopping_and_progress():
     gen = with_previews(iter_deconvolve(blurred, cp, n_times=8, n_iter=400, tol=1e-3), 2)
     out = run_to_completion(gen, records.append)
     assert out.shape == lf.shape and out.dtype == np.float32
-    assert 3 <= len(records) < 400  # stopped early on the objective's relative decrease
-    assert 0 <= records[-1].info["relative_decrease"] < 1e-3
-    assert all(r.stage == "tv" and r.n_iterations == 400 for r in records)
-    assert [r.iteration for r in records] == list(range(1, len(records) + 1))
+    # the channels are solved one after the other, each stopping early on its objective's relative decrease
+    channels = [[r for r in records if r.info["channel"] == c] for c in range(3)]
+    for c, recs in enumerate(channels):
+        assert 3 <= len(recs) < 400
+        assert 0 <= recs[-1].info["relative_decrease"] < 1e-3
+        assert [r.iteration for r in recs] == [c * 400 + i for i in range(1, len(recs) + 1)]
+        assert recs[-1].loss <= recs[0].loss
+    assert [r.info["channel"] for r in records] == sorted(r.info["channel"] for r in records)
+    assert all(r.stage == "tv" and r.n_iterations == 3 * 400 for r in records)
     assert records[1].preview is not None and records[1].preview.shape == lf.shape
     assert records[0].preview is None and records[2].preview is None
     assert np.isfinite([r.loss for r in records]).all()
-    assert records[-1].loss <= records[0].loss
     assert rmse(out, lf) < rmse(blurred, lf)
 
 

@@ -193,19 +193,38 @@ def _make_params(params, overrides) -> DeconvolutionParams:
 # ----------------------------------------------------------------- TV
 
 
-def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: DeconvolutionParams, weight, sigma, ndim):
-    """FISTA with a warm-started TV prox for ``1/2 ||K x - f||^2 + w TV4(x)`` (+ box); yields Progress."""
+def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: DeconvolutionParams, weight, sigma,
+             out: np.ndarray):
+    """FISTA with a warm-started TV prox for ``1/2 ||K x - f||^2 + w TV4(x)`` (+ box); yields Progress.
+
+    The channels are independent (the TV does not couple them), so they are
+    solved one after the other with one single-channel operator ``op``: the
+    solver's buffers then hold one channel, not all. ``f``, ``x0``: (V, U,
+    Y, X, C); each channel's result is written into ``out`` (the input's
+    numpy shape), which is returned.
+    """
     box = None
     if params.clip and float(f.min()) >= 0.0 and float(f.max()) <= 1.0:
         box = (0.0, 1.0)
+    C = f.shape[-1]
+    view = out if out.ndim == 5 else out[..., None]
+    for c in range(C):
+        def record(it, x, info, c=c):
+            def estimate():
+                full = out.copy()
+                (full if full.ndim == 5 else full[..., None])[..., c] = from_tensor(x, 4)
+                return full
 
-    def record(it, x, info):
-        return Progress(stage="tv", iteration=it, n_iterations=params.n_iter, loss=info["objective"],
-                        estimate=lambda: from_tensor(x, ndim).copy(), info={**info, "weight": weight, "sigma": sigma})
+            return Progress(stage="tv", iteration=c * params.n_iter + it, n_iterations=C * params.n_iter,
+                            loss=info["objective"], estimate=estimate,
+                            info={**info, "weight": weight, "sigma": sigma, "channel": c, "n_channels": C})
 
-    return (yield from iter_fista_tv(op, f, x0, weight=weight, n_iter=params.n_iter, tol=params.tol,
-                                     isotropic=params.isotropic, axis_weights=params.axis_weights, box=box,
-                                     n_inner=N_INNER, record=record))
+        x = yield from iter_fista_tv(op, f[..., c : c + 1].contiguous(), x0[..., c : c + 1].contiguous(),
+                                     weight=weight, n_iter=params.n_iter, tol=params.tol, isotropic=params.isotropic,
+                                     axis_weights=params.axis_weights, box=box, n_inner=N_INNER, record=record)
+        view[..., c] = from_tensor(x, 4)
+        del x
+    return out
 
 
 # ------------------------------------------------------------ front end
@@ -283,10 +302,9 @@ def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
         yield Progress(stage="inplane", iteration=1, n_iterations=1, info={"weight": weight, "method": method},
                        estimate=out.copy)
         return out
-    op = BlurOperator(f.shape, cp, n_times=n_times, infinity_disparity=d_inf, device=dev, frame=frame)
+    op = BlurOperator((*f.shape[:4], 1), cp, n_times=n_times, infinity_disparity=d_inf, device=dev, frame=frame)
     x0 = f if init is None else to_tensor(init, device=dev)
-    x = yield from _iter_tv(op, f, x0, p, weight, sigma, arr.ndim)
-    return from_tensor(x, arr.ndim)
+    return (yield from _iter_tv(op, f, x0, p, weight, sigma, np.empty(arr.shape, np.float32)))
 
 
 def deconvolve(

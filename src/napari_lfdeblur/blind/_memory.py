@@ -10,8 +10,8 @@ __all__ = ["estimate_blind_memory", "plan_tiles", "tiles", "TILE_MARGIN", "MIN_T
 TILE_MARGIN = 12
 #: smallest tile side (px) worth working on
 MIN_TILE = 32
-#: input-sized float32 tensors alive at once in the final stage (see estimate_blind_memory)
-FINAL_TENSORS = 21
+#: one-channel float32 tensors alive at once in the final stage, besides the result (see estimate_blind_memory)
+FINAL_TENSORS = 22
 
 
 def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
@@ -36,10 +36,11 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     V, U, Y, X = shape[:4]
     C = shape[4] if len(shape) == 5 else 1
     n = V * U * Y * X
-    # the final stage's float32 tensors of the input's size: FISTA's iterates x, x_new, y and two
-    # scratch buffers, K x, K y, K x_new, the residual and the gradient (10); the TV prox's dual field
-    # and its extrapolation (4 + 4), its primal and the dual norm (2); the result's copy (1)
-    final = n * C * 4 * FINAL_TENSORS
+    # the final stage solves one colour channel at a time; float32 tensors of one channel's size:
+    # the channel's data and start (2), FISTA's iterates x, x_new, y and two scratch buffers, K x, K y,
+    # K x_new, the residual and the gradient (10), the TV prox's dual field and its extrapolation
+    # (4 + 4), its primal and the dual norm (2); and the result, all channels
+    final = n * 4 * (FINAL_TENSORS + C)
     r = p.path.region
     ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
     # the full-size input and its grayscale (and refocused) copies, then the window's path stage:
