@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from napari_lfdeblur.blind import BlindParams, blind_deblur
-from napari_lfdeblur.blind._region import choose_region, path_in_frame
+from napari_lfdeblur.blind._region import choose_region
+from napari_lfdeblur.path import path_in_frame
 from napari_lfdeblur.blur import simulate_blur
 from napari_lfdeblur.path import bezier_positions, center_path
 from napari_lfdeblur.samples import synthetic_scene

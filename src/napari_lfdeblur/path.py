@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
+    "path_in_frame",
     "validate_control_points",
     "validate_n_times",
     "sample_times",
@@ -335,3 +336,45 @@ def load_path_json(path) -> np.ndarray:
         return validate_control_points(cp)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
+
+
+def path_in_frame(cp, window, frame_shape) -> np.ndarray:
+    """A path estimated on a window, in the full frame's coordinates.
+
+    With ``x~ = (x - (X - 1) / 2) / R``, ``R = max(Y, X) / 2``, taken in the
+    window (``x~_w``, ``R_w``) and in the frame (``x~``, ``R``): ``x~ = rho
+    x~_w + delta_x`` with ``rho = R_w / R`` and ``delta_x`` the window
+    centre's ``x~`` in the frame. The model's ``p_x - x~ p_z`` is then the
+    window's ``p_x' - x~_w p_z'`` with ``p_z' = rho p_z`` and ``p_x' = p_x -
+    delta_x p_z`` (likewise ``y``), which this inverts.
+
+    Use it for a path estimated on a crop of a light field, to blur or
+    restore the whole light field with it.
+
+    Parameters
+    ----------
+    cp : array_like, shape (n, 3)
+        Control points found on the window.
+    window : tuple of 4 int
+        ``(y0, x0, height, width)`` of the window in the frame.
+    frame_shape : tuple of 2 int
+        ``(Y, X)`` of the frame.
+
+    Returns
+    -------
+    ndarray, float64, shape (n, 3)
+
+    Examples
+    --------
+    >>> cp_crop = [[-0.5, 0.0, 0.4], [0.5, 0.0, -0.4]]
+    >>> path_in_frame(cp_crop, (0, 0, 128, 128), (376, 541)).round(3).tolist()
+    [[-1.791, -0.775, 1.691], [1.791, 0.775, -1.691]]
+    """
+    cp = validate_control_points(cp)
+    y0, x0, h, w = window
+    Y, X = frame_shape
+    R, R_w = max(Y, X) / 2.0, max(h, w) / 2.0
+    dy = (y0 + (h - 1) / 2.0 - (Y - 1) / 2.0) / R
+    dx = (x0 + (w - 1) / 2.0 - (X - 1) / 2.0) / R
+    pz = cp[:, 2] * R / R_w
+    return np.stack([cp[:, 0] + dx * pz, cp[:, 1] + dy * pz, pz], axis=1)

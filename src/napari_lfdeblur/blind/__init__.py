@@ -92,14 +92,14 @@ import torch
 from .. import devices
 from .._lightfield import check_number
 from ..blur import validate_lightfield
-from ..path import bezier_positions, canonical_time_direction, center_path
+from ..path import bezier_positions, canonical_time_direction, center_path, path_in_frame
 from ..progress import Progress, run_to_completion
 from ._alternating import iter_alternating, relay
 from ._disparity import gray, shear
 from ._evidence import blur_evidence, evidence_message
 from ._joint import iter_joint
 from ._memory import TILE_MARGIN, estimate_blind_memory, plan_tiles, tiles
-from ._region import choose_region, path_in_frame
+from ._region import choose_region
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams
 
 #: why ``infinity_disparity='auto'`` is refused (docs/blind.md, "Where d_inf comes from")

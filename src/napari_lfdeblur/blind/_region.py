@@ -11,10 +11,8 @@ over its pixels, of the smaller eigenvalue of the centre view's structure
 tensor (large only where the gradients span two directions; Shi & Tomasi,
 1994) times the fit's own disparity weight, and picks the best.
 
-:func:`path_in_frame` carries a path estimated on a window over to the full
-frame: ``x~`` is normalised by the frame's size and centred on its centre,
-so the window's ``p_z`` is rescaled and its off-centre position turns part of
-``p_z`` into ``p_x, p_y``.
+:func:`~napari_lfdeblur.path.path_in_frame` carries the path found on the
+window over to the full frame.
 """
 
 from __future__ import annotations
@@ -25,7 +23,7 @@ from scipy import ndimage
 
 from ._disparity import disparity_weights
 
-__all__ = ["choose_region", "path_in_frame", "region_score", "STRUCTURE_SIGMA"]
+__all__ = ["choose_region", "region_score", "STRUCTURE_SIGMA"]
 
 #: Gaussian (px) integrating the structure tensor
 STRUCTURE_SIGMA = 2.0
@@ -92,36 +90,3 @@ def choose_region(g: torch.Tensor, size: int, disparity_power: float) -> tuple[i
              - integral[ys[:, None] + h, xs[None, :]] + integral[ys[:, None], xs[None, :]])
     i, j = np.unravel_index(int(np.argmax(total)), total.shape)
     return int(ys[i]), int(xs[j]), h, w
-
-
-def path_in_frame(cp, window, frame_shape) -> np.ndarray:
-    """A path estimated on a window, in the full frame's coordinates.
-
-    With ``x~ = (x - (X - 1) / 2) / R``, ``R = max(Y, X) / 2``, taken in the
-    window (``x~_w``, ``R_w``) and in the frame (``x~``, ``R``): ``x~ = rho
-    x~_w + delta_x`` with ``rho = R_w / R`` and ``delta_x`` the window
-    centre's ``x~`` in the frame. The model's ``p_x - x~ p_z`` is then the
-    window's ``p_x' - x~_w p_z'`` with ``p_z' = rho p_z`` and ``p_x' = p_x -
-    delta_x p_z`` (likewise ``y``), which this inverts.
-
-    Parameters
-    ----------
-    cp : array_like, shape (n, 3)
-        Control points found on the window.
-    window : tuple of 4 int
-        ``(y0, x0, height, width)`` of the window in the frame.
-    frame_shape : tuple of 2 int
-        ``(Y, X)`` of the frame.
-
-    Returns
-    -------
-    ndarray, float64, shape (n, 3)
-    """
-    cp = np.array(cp, dtype=np.float64)
-    y0, x0, h, w = window
-    Y, X = frame_shape
-    R, R_w = max(Y, X) / 2.0, max(h, w) / 2.0
-    dy = (y0 + (h - 1) / 2.0 - (Y - 1) / 2.0) / R
-    dx = (x0 + (w - 1) / 2.0 - (X - 1) / 2.0) / R
-    pz = cp[:, 2] * R / R_w
-    return np.stack([cp[:, 0] + dx * pz, cp[:, 1] + dy * pz, pz], axis=1)
