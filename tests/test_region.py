@@ -142,3 +142,13 @@ def test_the_memory_estimate_is_within_30_percent_of_the_measured_peak():
                          env={**os.environ, "OMP_NUM_THREADS": "2"})
     m = json.loads(out.stdout.strip().splitlines()[-1])
     assert abs(m["estimate"] - m["measured"]) <= 0.3 * m["measured"], m
+
+
+def test_choose_region_keeps_the_margin_from_the_edges():
+    tex = np.random.default_rng(3).random((24, 24))
+    g = _textured_lf(tex, (0, 0))  # the only texture in the corner
+    y0, x0, _, _ = choose_region(g, 32, disparity_power=0.0, margin=5)
+    assert y0 >= 5 and x0 >= 5
+    assert choose_region(g, 32, disparity_power=0.0)[:2] == (0, 0)
+    # a view too small for the margin: the window is centred
+    assert choose_region(_textured_lf(tex, (0, 0), shape=(3, 3, 36, 96)), 32, 0.0, margin=5)[0] == 2

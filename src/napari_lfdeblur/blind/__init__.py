@@ -339,7 +339,8 @@ def _path_window(arr, d_inf, p: BlindParams, dev, sheared):
     size = p.path.region
     if not size or (Y <= size and X <= size):
         return g, (0, 0, Y, X)
-    window = choose_region(g, size, p.path.disparity_weight)
+    margin = math.ceil(abs(d_inf) * (max(arr.shape[:2]) - 1) / 2.0)  # refocused samples read beyond the edge
+    window = choose_region(g, size, p.path.disparity_weight, margin)
     y0, x0, h, w = window
     return g[:, :, y0 : y0 + h, x0 : x0 + w].contiguous(), window
 

@@ -58,11 +58,12 @@ def region_score(g: torch.Tensor, disparity_power: float) -> np.ndarray:
     return score
 
 
-def choose_region(g: torch.Tensor, size: int, disparity_power: float) -> tuple[int, int, int, int]:
+def choose_region(g: torch.Tensor, size: int, disparity_power: float, margin: int = 0) -> tuple[int, int, int, int]:
     """The ``size x size`` window (clipped to the view) with the largest total :func:`region_score`.
 
     Candidate corners lie on a grid of step ``max(1, size // 8)`` px, the last
-    one flush with the far edge.
+    one flush with the far edge, and the window keeps ``margin`` px from the
+    view's edges where the view is large enough.
 
     Parameters
     ----------
@@ -70,6 +71,10 @@ def choose_region(g: torch.Tensor, size: int, disparity_power: float) -> tuple[i
     size : int
         Window side, px (>= 1).
     disparity_power : float
+    margin : int
+        Px to keep from the edges: where ``g`` was refocused by ``d_inf``, the
+        outer views' samples within ``|d_inf| (max(V, U) - 1) / 2`` px of the
+        edge were read beyond it (clamped), and they mislead the fit.
 
     Returns
     -------
@@ -84,8 +89,12 @@ def choose_region(g: torch.Tensor, size: int, disparity_power: float) -> tuple[i
     integral = np.zeros((Y + 1, X + 1))
     integral[1:, 1:] = s.cumsum(axis=0).cumsum(axis=1)
     step = max(1, size // 8)
-    ys = np.unique(np.r_[np.arange(0, Y - h + 1, step), Y - h])
-    xs = np.unique(np.r_[np.arange(0, X - w + 1, step), X - w])
+
+    def corners(n, m):
+        lo, hi = (margin, n - m - margin) if n - m - 2 * margin >= 0 else ((n - m) // 2, (n - m) // 2)
+        return np.unique(np.r_[np.arange(lo, hi + 1, step), hi])
+
+    ys, xs = corners(Y, h), corners(X, w)
     total = (integral[ys[:, None] + h, xs[None, :] + w] - integral[ys[:, None], xs[None, :] + w]
              - integral[ys[:, None] + h, xs[None, :]] + integral[ys[:, None], xs[None, :]])
     i, j = np.unravel_index(int(np.argmax(total)), total.shape)
