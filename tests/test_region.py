@@ -152,3 +152,19 @@ def test_choose_region_keeps_the_margin_from_the_edges():
     assert choose_region(g, 32, disparity_power=0.0)[:2] == (0, 0)
     # a view too small for the margin: the window is centred
     assert choose_region(_textured_lf(tex, (0, 0), shape=(3, 3, 36, 96)), 32, 0.0, margin=5)[0] == 2
+
+
+def test_final_stage_progress_counts_every_channel_and_only_grows():
+    from napari_lfdeblur.blind import iter_blind_deblur
+    from napari_lfdeblur.progress import run_to_completion
+
+    sharp, _ = synthetic_scene((3, 3, 24, 24), color=True, seed=1)
+    blurred = simulate_blur(sharp, [[-0.5, 0.2, 0.0], [0.5, -0.2, 0.0]], n_times=8)
+    p = BlindParams().replace(n_control_points=2, n_times=8, final_n_times=8, require_evidence=False,
+                              final={"n_iter": 3, "tol": 0.0},
+                              path=dict(n_outer=1, steps=5, n_random=5, n_random_later=1, z_outer=1))
+    records = []
+    run_to_completion(iter_blind_deblur(blurred, params=p, device="cpu"), records.append)
+    final = [r for r in records if r.stage == "final"]
+    assert [r.iteration for r in final] == list(range(1, 10)) and {r.n_iterations for r in final} == {9}
+    assert [r.info["channel"] for r in final] == [0, 0, 0, 1, 1, 1, 2, 2, 2]

@@ -402,7 +402,7 @@ def _iter_evidence(g, est, p: BlindParams, dev):
 
 
 def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
-    """The final non-blind stage, all channels at once (tile by tile when memory is short)."""
+    """The final non-blind stage over the whole light field (tile by tile when memory is short)."""
     from ..deconvolution import estimate_noise_sigma, iter_deconvolve
 
     Y, X = arr.shape[2:4]
@@ -417,7 +417,6 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
         reach = float(np.abs(bezier_positions(cp, p.final_n_times)).sum(axis=1).max())  # |p_x| + |p_y| + |p_z|
         parts = list(tiles(Y, X, tile, TILE_MARGIN + int(math.ceil(abs(d_inf) * reach))))
         out = np.array(arr, dtype=np.float32)  # restored tile by tile; the rest shows as blurred meanwhile
-    n_iter = final.n_iter
     for i, (core, pad) in enumerate(parts):
         y0, x0 = pad[0].start or 0, pad[1].start or 0
         gen = iter_deconvolve(arr[:, :, pad[0], pad[1]], cp, n_times=p.final_n_times, infinity_disparity=d_inf,
@@ -428,7 +427,8 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
 
         def relabel(rec, i=i, core=core, inner=inner):
             return Progress(stage="final" if tile is None else f"final (tile {i + 1}/{len(parts)})",
-                            iteration=i * n_iter + rec.iteration, n_iterations=n_iter * len(parts), loss=rec.loss,
+                            iteration=i * rec.n_iterations + rec.iteration, n_iterations=rec.n_iterations * len(parts),
+                            loss=rec.loss,
                             control_points=cp,
                             estimate=_tile_estimate(rec, out, core, inner), stage_index=n_path,
                             n_stages=n_path + 1, info=rec.info)
