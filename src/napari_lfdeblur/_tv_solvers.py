@@ -14,7 +14,7 @@ import math
 import numpy as np
 import torch
 
-from .priors import gradient_norm_bound
+from .priors import divergence4d, gradient_norm_bound
 
 __all__ = ["TVProx", "add_gradient_", "tv_value", "iter_fista_tv", "estimate_noise_sigma"]
 
@@ -55,19 +55,6 @@ def tv_value(x, isotropic, axis_weights, buffers=None) -> float:
     return float(acc.sqrt_().sum()) if isotropic else total
 
 
-def _divergence_into(out, q, axis_weights):
-    """``out = div q`` (the negative adjoint of the forward differences), in place."""
-    out.zero_()
-    for axis in range(4):
-        n = out.shape[axis]
-        if n < 2 or axis_weights[axis] == 0:
-            continue
-        last = q[axis].narrow(axis, 0, n - 1)
-        out.narrow(axis, 0, n - 1).add_(last, alpha=axis_weights[axis])
-        out.narrow(axis, 1, n - 1).sub_(last, alpha=axis_weights[axis])
-    return out
-
-
 class TVProx:
     """``prox(v, mu) = argmin_x 1/2 ||x - v||^2 + mu TV4(x)`` over the box, by dual FGP.
 
@@ -89,7 +76,7 @@ class TVProx:
         self.norm = torch.empty_like(like) if isotropic else None
 
     def _primal(self, v, mu, q, out):
-        x = _divergence_into(out, q, self.aw).mul_(mu).add_(v)
+        x = divergence4d(q, self.aw, out=out).mul_(mu).add_(v)
         return x if self.box is None else x.clamp_(*self.box)
 
     def _project(self, r):

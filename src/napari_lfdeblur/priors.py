@@ -87,7 +87,8 @@ def _forward_differences(L: torch.Tensor, axes, w) -> tuple[torch.Tensor, ...]:
     return tuple(out)
 
 
-def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None = None) -> torch.Tensor:
+def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None = None,
+                 out: torch.Tensor | None = None) -> torch.Tensor:
     """Discrete divergence: the exact negative adjoint of :func:`gradient4d`.
 
     Parameters
@@ -96,6 +97,9 @@ def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None
         A vector field, one component per axis ``v, u, y, x``.
     axis_weights : sequence of 4 floats, optional
         The same weights as given to :func:`gradient4d`.
+    out : torch.Tensor, optional
+        Written in place and returned, instead of a new tensor (the
+        components' shape, dtype and device).
 
     Returns
     -------
@@ -104,13 +108,13 @@ def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None
     """
     if len(G) != 4:
         raise ValueError(f"divergence4d takes 4 components (v, u, y, x); got {len(G)}")
-    return _divergence(G, range(4), _weights(axis_weights))
+    return _divergence(G, range(4), _weights(axis_weights), out)
 
 
-def _divergence(G: Sequence[torch.Tensor], axes, w) -> torch.Tensor:
-    """The negative adjoint of :func:`_forward_differences` along ``axes``, one component each."""
+def _divergence(G: Sequence[torch.Tensor], axes, w, out=None) -> torch.Tensor:
+    """The negative adjoint of :func:`_forward_differences` along ``axes``, one component each (into ``out``)."""
     shape = G[0].shape
-    div = torch.zeros_like(G[0])
+    div = torch.zeros_like(G[0]) if out is None else out.zero_()
     for axis, g in zip(axes, G):
         _check(g)
         if g.shape != shape:
