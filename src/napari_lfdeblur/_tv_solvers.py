@@ -14,7 +14,7 @@ import math
 import numpy as np
 import torch
 
-from .priors import divergence4d, gradient_norm_bound
+from .priors import divergence4d, gradient_norm_bound, project_tv_dual
 
 __all__ = ["TVProx", "add_gradient_", "tv_value", "iter_fista_tv", "estimate_noise_sigma"]
 
@@ -79,19 +79,6 @@ class TVProx:
         x = divergence4d(q, self.aw, out=out).mul_(mu).add_(v)
         return x if self.box is None else x.clamp_(*self.box)
 
-    def _project(self, r):
-        """Scale each sample's dual 4-vector into the unit ball (isotropic) or clip it (anisotropic), in place."""
-        if not self.isotropic:
-            for q in r:
-                q.clamp_(-1.0, 1.0)
-            return
-        norm = torch.mul(r[0], r[0], out=self.norm)
-        for q in r[1:]:
-            norm.addcmul_(q, q)
-        norm.sqrt_().clamp_(min=1.0)
-        for q in r:
-            q.div_(norm)
-
     def __call__(self, v: torch.Tensor, mu: float, out: torch.Tensor) -> torch.Tensor:
         if mu <= 0:
             out.copy_(v)
@@ -103,7 +90,7 @@ class TVProx:
         step = 1.0 / (mu * self.lip)
         for _ in range(self.n_inner):
             add_gradient_(r, self._primal(v, mu, r, self.x), step, self.aw)  # r <- p_new (in place)
-            self._project(r)
+            project_tv_dual(r, 1.0, self.isotropic, self.norm)
             t_new = (1.0 + math.sqrt(1.0 + 4.0 * t * t)) / 2.0
             beta = (t - 1.0) / t_new
             for a in range(4):  # p <- p_new + beta (p_new - p); swap so that r holds the extrapolation

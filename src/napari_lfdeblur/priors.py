@@ -237,24 +237,29 @@ def tv4d(
     raise ValueError(f"reduction must be 'sum' or 'mean'; got {reduction!r}")
 
 
-def project_tv_dual(P: Sequence[torch.Tensor], radius: float, isotropic: bool = True) -> tuple[torch.Tensor, ...]:
+def project_tv_dual(P: Sequence[torch.Tensor], radius: float, isotropic: bool = True,
+                    work: torch.Tensor | None = None) -> tuple[torch.Tensor, ...]:
     """Project a dual field onto the TV dual ball (the prox of the conjugate of ``radius * TV``).
 
     Isotropic: each sample's 4-vector is scaled into the l2 ball of ``radius``;
     anisotropic: each component is clipped to ``[-radius, radius]``.
-    Works in place on ``P`` and returns it.
+    Works in place on ``P`` and returns it. ``work``, a tensor of the
+    components' shape, holds the per-sample norm instead of a new tensor.
     """
-    if isotropic:
-        norm = gradient_magnitude4d(P)
-        scale = torch.clamp(norm / radius, min=1.0) if radius > 0 else None
-        for p in P:
-            if scale is None:
-                p.zero_()
-            else:
-                p.div_(scale)
-    else:
+    if not isotropic:
         for p in P:
             p.clamp_(-radius, radius)
+        return tuple(P)
+    if radius <= 0:
+        for p in P:
+            p.zero_()
+        return tuple(P)
+    norm = torch.mul(P[0], P[0], out=work) if work is not None else P[0] * P[0]
+    for p in P[1:]:
+        norm.addcmul_(p, p)
+    scale = norm.sqrt_().div_(radius).clamp_(min=1.0)
+    for p in P:
+        p.div_(scale)
     return tuple(P)
 
 
