@@ -151,7 +151,7 @@ class DeconvolutionParams(JsonParams):
 
         Parameters
         ----------
-        method : {'tv', 'inplane'}
+        method : {'tv', 'inplane', 'auto'}
         sigma : float, optional
             The noise level of the data (:func:`estimate_noise_sigma`); needed
             by ``'tv'`` when ``weight`` is None.
@@ -159,8 +159,8 @@ class DeconvolutionParams(JsonParams):
         Returns
         -------
         float
-            ``weight`` when set; otherwise ``NOISE_WEIGHT_FACTOR * sigma`` for
-            ``'tv'`` and ``INPLANE_WEIGHT`` for ``'inplane'``.
+            ``weight`` when set; otherwise ``INPLANE_WEIGHT`` for ``'inplane'``
+            and ``NOISE_WEIGHT_FACTOR * sigma`` for ``'tv'`` (and ``'auto'``).
         """
         if self.weight is not None:
             return self.weight
@@ -219,9 +219,11 @@ def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: Deconv
                             loss=info["objective"], estimate=estimate,
                             info={**info, "weight": weight, "sigma": sigma, "channel": c, "n_channels": C})
 
-        x = yield from iter_fista_tv(op, f[..., c : c + 1].contiguous(), x0[..., c : c + 1].contiguous(),
-                                     weight=weight, n_iter=params.n_iter, tol=params.tol, isotropic=params.isotropic,
-                                     axis_weights=params.axis_weights, box=box, n_inner=N_INNER, record=record)
+        fc = f[..., c : c + 1].contiguous()
+        x0c = fc if x0 is f else x0[..., c : c + 1].contiguous()  # the start is the data unless given
+        x = yield from iter_fista_tv(op, fc, x0c, weight=weight, n_iter=params.n_iter, tol=params.tol,
+                                     isotropic=params.isotropic, axis_weights=params.axis_weights, box=box,
+                                     n_inner=N_INNER, record=record)
         view[..., c] = from_tensor(x, 4)
         del x
     return out

@@ -336,11 +336,12 @@ def _path_window(arr, d_inf, p: BlindParams, dev, sheared):
     del f
     if sheared:
         g = shear(g, d_inf)
-    size = p.path.region
-    if not size or (Y <= size and X <= size):
+    if not p.path.region:
         return g, (0, 0, Y, X)
     margin = math.ceil(abs(d_inf) * (max(arr.shape[:2]) - 1) / 2.0)  # refocused samples read beyond the edge
-    window = choose_region(g, size, p.path.disparity_weight, margin)
+    window = choose_region(g, p.path.region, p.path.disparity_weight, margin)
+    if window == (0, 0, Y, X):
+        return g, window
     y0, x0, h, w = window
     return g[:, :, y0 : y0 + h, x0 : x0 + w].contiguous(), window
 
@@ -408,8 +409,7 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
     Y, X = arr.shape[2:4]
     final = p.final
     if final.weight is None:  # one weight for the whole light field, so that tiles agree
-        method = "inplane" if final.method == "inplane" else "tv"
-        final = final.replace(weight=final.effective_weight(method, estimate_noise_sigma(arr)))
+        final = final.replace(weight=final.effective_weight(final.method, estimate_noise_sigma(arr)))
     if tile is None:
         parts = [((slice(None), slice(None)), (slice(None), slice(None)))]
         out = None
