@@ -50,13 +50,13 @@ PATH = np.array([[-0.9, 0.4, 0.3], [0.3, -0.7, -0.2], [0.8, 0.6, 0.1]])
 CROP = 128
 
 
-def sharp_lightfield(scene: str, d_inf: float) -> np.ndarray:
-    """The sharp light field of a case (the synthetic scene is rendered nearer than ``d_inf``)."""
+def sharp_lightfield(scene: str, d_inf: float, seed: int = 7) -> np.ndarray:
+    """The sharp light field of a case: the Illum capture, or the rendered scene (nearer than ``d_inf``)."""
     if scene == "Illum":
         return eval_set.capture("Illum")
     from napari_lfdeblur.samples import procedural_scene
 
-    return procedural_scene((9, 9, 376, 541), seed=7, color=True, infinity_disparity=d_inf)[0]
+    return procedural_scene((9, 9, 376, 541), seed=seed, color=True, infinity_disparity=d_inf)[0]
 
 
 def central(a, size=CROP):

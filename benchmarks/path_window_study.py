@@ -31,20 +31,17 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _report  # noqa: E402  (benchmarks/_report.py)
 import eval_set  # noqa: E402
+from bench_fullres import PATH, sharp_lightfield  # noqa: E402  (the same path and scenes)
 
-PATH = np.array([[-0.9, 0.4, 0.3], [0.3, -0.7, -0.2], [0.8, 0.6, 0.1]])
 SIZE = 128
 
 
 def scenes(seeds, d_infs):
-    from napari_lfdeblur.samples import procedural_scene
-
     for seed in seeds:
         for d_inf in d_infs:
-            yield f"rendered, seed {seed}", d_inf, procedural_scene((9, 9, 376, 541), seed=seed, color=True,
-                                                                     infinity_disparity=d_inf)[0]
+            yield f"rendered, seed {seed}", d_inf, sharp_lightfield("synthetic", d_inf, seed)
     if eval_set.capture_available("Illum"):
-        yield "Illum", 0.0, eval_set.capture("Illum")
+        yield "Illum", 0.0, sharp_lightfield("Illum", 0.0)
 
 
 def estimate(blurred, d_inf, window, params):
