@@ -28,6 +28,7 @@ def _lerp_axis(arr, axis, coord):
 
 
 def blur_reference(lf, cp, n_times, d_inf=0.0):
+    """The model's blur; ``cp`` of shape (n, 6) adds the first-order rotation of docs/model.md."""
     lf = np.asarray(lf, dtype=np.float64)
     gray = lf.ndim == 4
     if gray:
@@ -39,10 +40,15 @@ def blur_reference(lf, cp, n_times, d_inf=0.0):
     xt = (x - (X - 1) / 2) / R
     yt = (y - (Y - 1) / 2) / R
     for k in range(n_times):
-        px, py, pz = bezier_reference(cp, k / (n_times - 1))
+        pos = bezier_reference(cp, k / (n_times - 1))
+        px, py, pz = pos[:3]
+        rx, ry, rz = pos[3:] if len(pos) == 6 else (0.0, 0.0, 0.0)
         su = px - xt * pz
         sv = py - yt * pz
-        coords = [v + sv, u + su, y + d_inf * sv, x + d_inf * su]
+        # the rotated ray's slopes, to first order in the angles
+        dx = ry * (1 + xt**2) - rx * xt * yt - rz * yt
+        dy = -rx * (1 + yt**2) + ry * xt * yt + rz * xt
+        coords = [v + sv, u + su, y + R * dy + d_inf * sv, x + R * dx + d_inf * su]
         # quadrilinear lookup with clamping, ray by ray (16 corners)
         cl = [np.clip(c, 0, s - 1) for c, s in zip(coords, (V, U, Y, X))]
         i0 = [np.floor(c).astype(int) for c in cl]

@@ -5,7 +5,8 @@ Deblurring" (CVPR 2017) as a Python library and a napari plugin.
 
 The array layout, coordinates and units are those of docs/model.md: a light
 field is a ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` float32 array in [0, 1], and
-a camera path is a Bezier curve given by ``(n, 3)`` control points.
+a camera path is a Bezier curve given by ``(n, 3)`` control points, or
+``(n, 6)`` with a camera rotation.
 
 Importing this package is cheap and needs neither Qt nor napari: public names
 are loaded from their modules on first use.

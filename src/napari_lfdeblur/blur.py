@@ -29,6 +29,10 @@ gradients for both the light field and the path store no intermediates.
 With ``d_inf != 0`` each instant also shifts ``y`` and ``x``; the exposure is
 then one kernel over 4D integer offsets ``(v, y, u, x)``, applied the same
 way (:func:`~napari_lfdeblur._taps4d.tap_kernel_4d`).
+
+A path with rotation (6 columns) displaces the image by amounts that vary
+over the whole view; its 4D kernels are built and applied per spatial tile
+(:mod:`~napari_lfdeblur._taps_tiled`).
 """
 
 from __future__ import annotations
@@ -40,7 +44,8 @@ from ._lightfield import check_number, validate_lightfield
 from .devices import select_device
 from ._taps import TapBlur, Taps, tap_kernel
 from ._taps4d import Taps4D, tap_kernel_4d
-from .path import bezier_positions, validate_control_points, validate_n_times
+from ._taps_tiled import TiledTaps, rotation_displacement, tile_side, tiled_kernel
+from .path import bezier_positions, has_rotation, validate_control_points, validate_n_times
 
 __all__ = [
     "BlurOperator",
@@ -52,6 +57,7 @@ __all__ = [
     "normalized_coordinates",
     "interpolation_matrices",
     "angular_shifts",
+    "image_shifts",
     "tap_kernel",
     "lerp_taps",
 ]
@@ -142,7 +148,8 @@ def angular_shifts(positions: torch.Tensor, shape, frame=None):
 
     Parameters
     ----------
-    positions : torch.Tensor, shape (T, 3)
+    positions : torch.Tensor, shape (T, 3) or (T, 6)
+        Path positions; a rotation (columns 3 to 5) does not enter here.
     shape : tuple
         ``(V, U, Y, X, ...)`` of the light field.
     frame : tuple of 4 int, optional
@@ -164,6 +171,31 @@ def angular_shifts(positions: torch.Tensor, shape, frame=None):
         positions[:, 0:1] - xt[None, :] * positions[:, 2:3],
         positions[:, 1:2] - yt[None, :] * positions[:, 2:3],
     )
+
+
+def image_shifts(positions: torch.Tensor, shape, frame=None):
+    """The image displacement ``R (x~' - x~)``, ``R (y~' - y~)`` of a path's rotation (docs/model.md).
+
+    Parameters
+    ----------
+    positions : torch.Tensor, shape (T, 6)
+        Path positions ``(p_x, p_y, p_z, r_x, r_y, r_z)`` at the instants.
+    shape : tuple
+        ``(V, U, Y, X, ...)`` of the light field.
+    frame : tuple of 4 int, optional
+        As in :func:`angular_shifts`.
+
+    Returns
+    -------
+    t_y, t_x : torch.Tensor, shape (T, Y, X)
+        Displacements in px, before the ``d_inf`` share of the angular shifts.
+    """
+    Y, X = shape[2], shape[3]
+    y0, x0, Yf, Xf = (0, 0, Y, X) if frame is None else frame
+    r = max(Xf, Yf) / 2.0
+    xt = normalized_coordinates(Xf, r, positions.dtype, positions.device)[x0 : x0 + X]
+    yt = normalized_coordinates(Yf, r, positions.dtype, positions.device)[y0 : y0 + Y]
+    return rotation_displacement(positions[:, 3:6], xt, yt, r)
 
 
 def interpolation_matrices(positions: torch.Tensor, shape):
@@ -200,9 +232,11 @@ class BlurOperator:
     ----------
     shape : tuple of int
         ``(V, U, Y, X)`` or ``(V, U, Y, X, C)`` of the light fields it acts on.
-    control_points : array_like or torch.Tensor, shape (n, 3)
-        Bezier control points of the path (view units; docs/model.md). A tensor with
-        ``requires_grad`` makes :meth:`forward` differentiable in the path.
+    control_points : array_like or torch.Tensor, shape (n, 3) or (n, 6)
+        Bezier control points of the path: ``(p_x, p_y, p_z)`` in view units,
+        then optionally the rotation ``(r_x, r_y, r_z)`` in radians
+        (docs/model.md). A tensor with ``requires_grad`` makes
+        :meth:`forward` differentiable in the path.
     n_times : int, default 32
         Number of exposure instants ``T >= 2``.
     infinity_disparity : float, default 0.0
@@ -256,6 +290,8 @@ class BlurOperator:
         if isinstance(control_points, torch.Tensor):
             self.device = control_points.device if device in (None, "auto") else select_device(device)
             cp = control_points.to(device=self.device, dtype=dtype)
+            if cp.ndim != 2 or cp.shape[1] not in (3, 6):
+                raise ValueError(f"control points must be (n, 3) or (n, 6); got {tuple(cp.shape)}")
             if not torch.isfinite(cp.detach()).all():
                 raise ValueError("control points contain NaN or Inf")
         else:
@@ -269,11 +305,26 @@ class BlurOperator:
         V, U = self.shape[:2]
         #: angular shifts s_u (T, X) and s_v (T, Y) of every instant
         self.s_u, self.s_v = angular_shifts(self.positions, self.shape, self.frame)
-        # one kernel for the whole exposure: over view offsets, or over 4D offsets when d_inf != 0
-        if self.infinity_disparity == 0.0:
+        #: 'angular' (d_inf = 0), '4d' (d_inf != 0) or 'tiled' (rotation): how the kernel is held
+        self.kind = "angular" if self.infinity_disparity == 0.0 else "4d"
+        # a 6-column path without rotation is the 3-DOF one, unless its rotation needs a gradient
+        if cp.shape[1] == 6 and (cp.requires_grad or has_rotation(cp)):
+            self.kind = "tiled"
+        if self.kind == "angular":
             self._kernel = tap_kernel(self.s_u, self.s_v, U, V)
-        else:
+        elif self.kind == "4d":
             self._kernel = tap_kernel_4d(self.s_u, self.s_v, self.infinity_disparity, self.shape)
+        else:
+            self._kernel = self._tiled_kernel()
+
+    def _tiled_kernel(self):
+        t_y, t_x = image_shifts(self.positions, self.shape, self.frame)
+        d = self.infinity_disparity
+        if d != 0.0:
+            t_y = t_y + d * self.s_v[:, :, None]
+            t_x = t_x + d * self.s_u[:, None, :]
+        K, layout = tiled_kernel(self.s_v, self.s_u, t_y, t_x, self.shape, tile_side(self.shape, self.block_elements))
+        return K, layout
 
     def _check(self, t: torch.Tensor) -> torch.Tensor:
         if not isinstance(t, torch.Tensor):
@@ -285,33 +336,42 @@ class BlurOperator:
     def forward(self, lf: torch.Tensor) -> torch.Tensor:
         """Blur ``lf`` (shape ``(V, U, Y, X, C)``); differentiable in ``lf`` and the path."""
         L = self._check(lf)
-        if self.infinity_disparity == 0.0:
-            K, ov, ou = self._kernel
-            return TapBlur.apply(L, K, Taps(self.shape, K, ov, ou, self.block_elements))
-        K, offsets = self._kernel
-        return TapBlur.apply(L, K, Taps4D(self.shape, K, offsets, self.block_elements))
+        return TapBlur.apply(L, self._kernel[0], self._taps())
 
     __call__ = forward
 
     def adjoint(self, y: torch.Tensor) -> torch.Tensor:
         """The adjoint (transpose) of :meth:`forward` in the light field, for a fixed path."""
         G = self._check(y).detach().contiguous()
-        if self.infinity_disparity == 0.0:
+        return self._taps().adjoint(G)
+
+    def _taps(self):
+        """The object that applies the kernel (:class:`Taps`, :class:`Taps4D` or :class:`TiledTaps`)."""
+        if self.kind == "angular":
             K, ov, ou = self._kernel
-            return Taps(self.shape, K.detach(), ov, ou, self.block_elements).adjoint(G)
-        K, offsets = self._kernel
-        return Taps4D(self.shape, K.detach(), offsets, self.block_elements).adjoint(G)
+            return Taps(self.shape, K, ov, ou, self.block_elements)
+        if self.kind == "4d":
+            K, offsets = self._kernel
+            return Taps4D(self.shape, K, offsets, self.block_elements)
+        if getattr(self, "_tiles", None) is None:
+            self._tiles = TiledTaps(self.shape, *self._kernel)
+        return self._tiles
 
     @property
-    def n_taps(self) -> int:
-        """Passes over the light field one forward costs: the kernel's offsets that carry weight."""
-        if self.infinity_disparity == 0.0:
+    def n_taps(self) -> float:
+        """Passes over the light field one forward costs: the kernel's offsets that carry weight.
+
+        With rotation, the mean over the spatial tiles.
+        """
+        if self.kind == "angular":
             return int((self._kernel[0].detach().abs().amax(dim=(0, 1)) > 0).sum())
-        return int(self._kernel[0].shape[0])
+        if self.kind == "4d":
+            return int(self._kernel[0].shape[0])
+        return self._taps().n_taps
 
     def is_in_plane(self) -> bool:
-        """True when ``p_z = 0`` and ``d_inf = 0``: the blur is the same 4D convolution at every pixel."""
-        return self.infinity_disparity == 0.0 and bool((self.control_points[:, 2] == 0).all())
+        """True when ``p_z = 0``, ``d_inf = 0`` and no rotation: the same 4D convolution at every pixel."""
+        return self.kind == "angular" and bool((self.control_points[:, 2] == 0).all())
 
 
 def simulate_blur(lf, control_points, *, n_times: int = 32, infinity_disparity: float = 0.0, device="auto"):
@@ -321,8 +381,10 @@ def simulate_blur(lf, control_points, *, n_times: int = 32, infinity_disparity: 
     ----------
     lf : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
         The sharp light field. Any real dtype; computed in float32.
-    control_points : array_like, shape (n, 3)
-        Bezier control points ``(p_x, p_y, p_z)``, ``n >= 2``.
+    control_points : array_like, shape (n, 3) or (n, 6)
+        Bezier control points ``(p_x, p_y, p_z)`` in views, ``n >= 2``,
+        optionally followed by a rotation ``(r_x, r_y, r_z)`` in radians
+        (each within ``MAX_ROTATION``).
     n_times : int, default 32
         Number of exposure instants ``T >= 2``.
     infinity_disparity : float, default 0.0

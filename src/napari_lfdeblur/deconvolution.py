@@ -58,7 +58,7 @@ from ._params import JsonParams
 from .progress import Progress, run_to_completion
 from .blur import BlurOperator, from_tensor, to_tensor, validate_frame
 from .devices import select_device
-from .path import validate_control_points, validate_n_times
+from .path import has_rotation, validate_control_points, validate_n_times
 from .special_cases import inplane_matrix, solve_inplane
 from ._tv_solvers import estimate_noise_sigma, iter_fista_tv
 
@@ -249,14 +249,14 @@ def _validate(blurred, control_points, n_times, infinity_disparity, init):
 
 
 def _choose_method(method: str, cp: np.ndarray, d_inf: float) -> str:
-    in_plane = d_inf == 0.0 and bool(np.all(cp[:, 2] == 0))
+    in_plane = d_inf == 0.0 and bool(np.all(cp[:, 2] == 0)) and not has_rotation(cp)
     if method == "auto":
         return "tv"
     if method == "inplane" and not in_plane:
         raise ValueError(
-            "method 'inplane' needs an in-plane path (p_z = 0 at every control point) and "
-            f"infinity_disparity = 0; got max |p_z| = {np.abs(cp[:, 2]).max():g}, d_inf = {d_inf:g}. "
-            "Use method='tv'."
+            "method 'inplane' needs an in-plane path (p_z = 0 and no rotation at every control point) and "
+            f"infinity_disparity = 0; got max |p_z| = {np.abs(cp[:, 2]).max():g}, d_inf = {d_inf:g}"
+            f"{', a rotation' if has_rotation(cp) else ''}. Use method='tv'."
         )
     return method
 
@@ -328,8 +328,9 @@ def deconvolve(
     ----------
     blurred : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
         The blurred light field (docs/model.md layout), computed in float32.
-    control_points : array_like, shape (n, 3)
-        Bezier control points of the path (view units; docs/model.md).
+    control_points : array_like, shape (n, 3) or (n, 6)
+        Bezier control points of the path: translation in view units, then
+        optionally a rotation in radians (docs/model.md).
     n_times : int, default 32
         Exposure instants ``T`` of the blur model.
     infinity_disparity : float, default 0.0

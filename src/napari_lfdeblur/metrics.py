@@ -286,12 +286,15 @@ def path_error(
       ``||B(l, p_est) - B(l, p_true)|| / ||B(l, p_true) - l||`` compares the
       blurs the two centred paths produce on that (sharp) light field.
 
-    The estimate may have a different number of control points.
+    The estimate may have a different number of control points, and either
+    path may have a rotation (6 columns): the Chamfer distance and the RMSE
+    compare the translations ``(p_x, p_y, p_z)``; the blur mismatch compares
+    the whole motion.
 
     Parameters
     ----------
-    estimated_cp, true_cp : array_like, shape (n, 3)
-        Bezier control points (view units; docs/model.md).
+    estimated_cp, true_cp : array_like, shape (n, 3) or (n, 6)
+        Bezier control points (docs/model.md).
     n_times : int, default 64
         Instants used to sample both paths and to render the blurs.
     lightfield : ndarray, optional, shape (V, U, Y, X[, C])
@@ -304,8 +307,8 @@ def path_error(
     PathError
     """
     n_times = validate_n_times(n_times)
-    est = bezier_positions(validate_control_points(estimated_cp), n_times)
-    true = bezier_positions(validate_control_points(true_cp), n_times)
+    est = bezier_positions(validate_control_points(estimated_cp), n_times)[:, :3]
+    true = bezier_positions(validate_control_points(true_cp), n_times)[:, :3]
     est = est - est.mean(axis=0)
     true = true - true.mean(axis=0)
 

@@ -1,8 +1,10 @@
-"""Camera paths: Bezier curves in R^3 (docs/model.md, "Camera path").
+"""Camera paths: Bezier curves in R^3 or R^6 (docs/model.md, "Camera path").
 
 A path ``p(t) = (p_x, p_y, p_z)`` for ``t`` in [0, 1] is a Bezier curve of
 ``n >= 2`` control points, an ``(n, 3)`` array. ``p_x`` and ``p_y`` are in view
 units; ``p_z`` is in view units per unit of normalised image coordinate ``x~``.
+A 6-DOF path adds a small camera rotation ``(r_x, r_y, r_z)`` in radians: an
+``(n, 6)`` array (docs/model.md, "Camera rotation").
 The exposure is sampled at ``T`` instants ``t_k = k / (T - 1)``.
 """
 
@@ -16,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
+    "MAX_ROTATION",
+    "has_rotation",
     "path_in_frame",
     "validate_control_points",
     "validate_n_times",
@@ -36,21 +40,30 @@ __all__ = [
 ]
 
 
+#: largest rotation (radians) a control point may hold: beyond about 0.2 rad
+#: (11 degrees) the first-order rotation model of docs/model.md breaks down.
+MAX_ROTATION = 0.2
+
+
 def validate_control_points(control_points) -> np.ndarray:
-    """Check control points and return them as a float64 ``(n, 3)`` array.
+    """Check control points and return them as a float64 ``(n, 3)`` or ``(n, 6)`` array.
+
+    Columns are ``(p_x, p_y, p_z)`` or ``(p_x, p_y, p_z, r_x, r_y, r_z)``.
 
     Raises
     ------
     ValueError
-        If the array is not ``(n, 3)`` with ``n >= 2`` or holds NaN or Inf.
+        If the array is not ``(n, 3)`` or ``(n, 6)`` with ``n >= 2``, holds NaN
+        or Inf, or a rotation beyond ``MAX_ROTATION`` radians.
     """
     try:
         cp = np.asarray(control_points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"control points must be numbers: {exc}") from None
-    if cp.ndim != 2 or cp.shape[1] != 3:
+    if cp.ndim != 2 or cp.shape[1] not in (3, 6):
         raise ValueError(
-            f"control points must be an (n, 3) array of (p_x, p_y, p_z); got shape {cp.shape}"
+            "control points must be an (n, 3) array of (p_x, p_y, p_z) or an (n, 6) array of "
+            f"(p_x, p_y, p_z, r_x, r_y, r_z); got shape {cp.shape}"
         )
     if cp.shape[0] < 2:
         raise ValueError(
@@ -58,7 +71,26 @@ def validate_control_points(control_points) -> np.ndarray:
         )
     if not np.all(np.isfinite(cp)):
         raise ValueError("control points contain NaN or Inf")
+    if cp.shape[1] == 6 and np.abs(cp[:, 3:]).max() > MAX_ROTATION:
+        raise ValueError(
+            f"rotations must stay within {MAX_ROTATION} rad ({math.degrees(MAX_ROTATION):.1f} degrees), "
+            f"where the small-angle model holds; got {np.abs(cp[:, 3:]).max():.3g} rad"
+        )
     return np.ascontiguousarray(cp)
+
+
+def has_rotation(control_points) -> bool:
+    """True when ``control_points`` is ``(n, 6)`` with a rotation that is not zero."""
+    shape = getattr(control_points, "shape", None) or np.shape(control_points)
+    if len(shape) != 2 or shape[1] != 6:
+        return False
+    try:
+        import torch
+    except ImportError:  # pragma: no cover - torch is a dependency
+        torch = None
+    if torch is not None and isinstance(control_points, torch.Tensor):
+        return bool((control_points.detach()[:, 3:] != 0).any())
+    return bool(np.any(np.asarray(control_points)[:, 3:] != 0))
 
 
 def validate_n_times(n_times) -> int:
@@ -97,7 +129,7 @@ def bezier_positions(control_points, n_times: int):
 
     Parameters
     ----------
-    control_points : array_like or torch.Tensor, shape (n, 3)
+    control_points : array_like or torch.Tensor, shape (n, 3) or (n, 6)
         A torch tensor stays a tensor (differentiable); anything else gives
         a numpy array.
     n_times : int
@@ -105,8 +137,8 @@ def bezier_positions(control_points, n_times: int):
 
     Returns
     -------
-    ndarray or torch.Tensor, shape (T, 3)
-        ``(p_x, p_y, p_z)`` at ``t_k = k / (T - 1)``.
+    ndarray or torch.Tensor, shape (T, 3) or (T, 6)
+        ``(p_x, p_y, p_z[, r_x, r_y, r_z])`` at ``t_k = k / (T - 1)``.
 
     Examples
     --------
@@ -120,9 +152,9 @@ def bezier_positions(control_points, n_times: int):
     except ImportError:  # pragma: no cover - torch is a dependency
         torch = None
     if torch is not None and isinstance(control_points, torch.Tensor):
-        if control_points.ndim != 2 or control_points.shape[1] != 3 or control_points.shape[0] < 2:
+        if control_points.ndim != 2 or control_points.shape[1] not in (3, 6) or control_points.shape[0] < 2:
             raise ValueError(
-                f"control points must be an (n, 3) tensor with n >= 2; got {tuple(control_points.shape)}"
+                f"control points must be an (n, 3) or (n, 6) tensor with n >= 2; got {tuple(control_points.shape)}"
             )
         basis = torch.as_tensor(
             bernstein_matrix(control_points.shape[0], n_times),
@@ -143,7 +175,7 @@ def center_path(control_points, n_times: int = 32) -> np.ndarray:
 
     Returns
     -------
-    ndarray, float64, shape (n, 3)
+    ndarray, float64, shape (n, 3) or (n, 6), as given
     """
     cp = validate_control_points(control_points)
     return cp - bezier_positions(cp, n_times).mean(axis=0)
@@ -157,12 +189,12 @@ def elevate_degree(control_points, n_points: int) -> np.ndarray:
 
     Parameters
     ----------
-    control_points : array_like, shape (n, 3)
+    control_points : array_like, shape (n, 3) or (n, 6)
     n_points : int, >= n
 
     Returns
     -------
-    ndarray, float64, shape (n_points, 3), the same curve
+    ndarray, float64, shape (n_points, 3) or (n_points, 6), the same curve
 
     Raises
     ------
@@ -188,18 +220,21 @@ def canonical_time_direction(control_points) -> np.ndarray:
 
     The path is reversed when the largest component (in magnitude) of
     ``last - first`` control point is negative, so that the path moves
-    towards positive values along its main direction.
+    towards positive values along its main direction. The translation
+    decides; the rotation only when the translation's ends coincide.
 
     Parameters
     ----------
-    control_points : array_like, shape (n, 3)
+    control_points : array_like, shape (n, 3) or (n, 6)
 
     Returns
     -------
-    ndarray, float64, shape (n, 3)
+    ndarray, float64, the shape given
     """
     cp = np.asarray(control_points, dtype=np.float64)
     d = cp[-1] - cp[0]
+    if np.any(d[:3] != 0):
+        d = d[:3]
     if d[np.argmax(np.abs(d))] < 0:
         cp = cp[::-1].copy()
     return cp
@@ -302,9 +337,12 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    units = "p_x, p_y in views; p_z in views per unit of normalised x~"
+    if cp.shape[1] == 6:
+        units += "; r_x, r_y, r_z in radians"
     doc = {
         "control_points": cp.tolist(),
-        "units": "p_x, p_y in views; p_z in views per unit of normalised x~ (docs/model.md)",
+        "units": units + " (docs/model.md)",
         **extra,
     }
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
@@ -320,7 +358,7 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
 def load_path_json(path) -> np.ndarray:
     """Read control points from a JSON file written by :func:`save_path_json`.
 
-    A bare list of ``[p_x, p_y, p_z]`` triples is accepted too.
+    A bare list of ``[p_x, p_y, p_z]`` triples (or 6-DOF rows) is accepted too.
     """
     path = Path(path)
     if not path.is_file():
@@ -353,8 +391,10 @@ def path_in_frame(cp, window, frame_shape) -> np.ndarray:
 
     Parameters
     ----------
-    cp : array_like, shape (n, 3)
-        Control points found on the window.
+    cp : array_like, shape (n, 3) or (n, 6)
+        Control points found on the window. A rotation cannot be carried
+        (its image displacement is quadratic in the frame's ``x~``, not in
+        the window's); a 6-column path must have none.
     window : tuple of 4 int
         ``(y0, x0, height, width)`` of the window in the frame.
     frame_shape : tuple of 2 int
@@ -362,7 +402,12 @@ def path_in_frame(cp, window, frame_shape) -> np.ndarray:
 
     Returns
     -------
-    ndarray, float64, shape (n, 3)
+    ndarray, float64, the shape of ``cp``
+
+    Raises
+    ------
+    ValueError
+        If ``cp`` holds a rotation.
 
     Examples
     --------
@@ -371,10 +416,16 @@ def path_in_frame(cp, window, frame_shape) -> np.ndarray:
     [[-1.791, -0.775, 1.691], [1.791, 0.775, -1.691]]
     """
     cp = validate_control_points(cp)
+    if has_rotation(cp):
+        raise ValueError(
+            "a path with rotation cannot be moved from a window to the frame; estimate it with the "
+            "frame's coordinates (BlurOperator's frame argument)"
+        )
     y0, x0, h, w = window
     Y, X = frame_shape
     R, R_w = max(Y, X) / 2.0, max(h, w) / 2.0
     dy = (y0 + (h - 1) / 2.0 - (Y - 1) / 2.0) / R
     dx = (x0 + (w - 1) / 2.0 - (X - 1) / 2.0) / R
     pz = cp[:, 2] * R / R_w
-    return np.stack([cp[:, 0] + dx * pz, cp[:, 1] + dy * pz, pz], axis=1)
+    out = np.stack([cp[:, 0] + dx * pz, cp[:, 1] + dy * pz, pz], axis=1)
+    return np.concatenate([out, cp[:, 3:]], axis=1)

@@ -29,7 +29,7 @@ import torch
 
 from ._lightfield import check_int, check_number, validate_lightfield
 from .blur import interpolation_matrices
-from .path import bezier_positions, validate_control_points, validate_n_times
+from .path import bezier_positions, has_rotation, validate_control_points, validate_n_times
 
 __all__ = [
     "inplane_matrix",
@@ -67,8 +67,8 @@ def inplane_matrix(control_points, V: int, U: int, *, n_times: int = 32) -> np.n
     ndarray, float64, shape (V*U, V*U)
     """
     cp = validate_control_points(control_points)
-    if np.any(cp[:, 2] != 0):
-        raise ValueError("inplane_matrix needs an in-plane path (p_z = 0 at every control point)")
+    if np.any(cp[:, 2] != 0) or has_rotation(cp):
+        raise ValueError("inplane_matrix needs an in-plane path (p_z = 0 and no rotation at every control point)")
     pos = torch.as_tensor(bezier_positions(cp, validate_n_times(n_times)), dtype=torch.float64)
     A, B, _, _ = interpolation_matrices(pos, (V, U, 1, 1))
     A, B = A[:, 0].numpy(), B[:, 0].numpy()
@@ -442,12 +442,12 @@ def inplane_psf(control_points, disparity: float, *, n_times: int = 32, size: in
     ndarray, float64, shape (size, size), centred, sums to 1
     """
     cp = validate_control_points(control_points)
-    if np.any(cp[:, 2] != 0):
-        raise ValueError("inplane_psf needs an in-plane path (p_z = 0)")
+    if np.any(cp[:, 2] != 0) or has_rotation(cp):
+        raise ValueError("inplane_psf needs an in-plane path (p_z = 0, no rotation)")
     d = check_number(disparity, "disparity")
     pos = bezier_positions(cp, validate_n_times(n_times))
     taps = []
-    for px, py, _ in pos:
+    for px, py, *_ in pos:
         fx, fy = math.floor(px), math.floor(py)
         ax, ay = px - fx, py - fy
         for jy, wy in ((fy, 1 - ay), (fy + 1, ay)):

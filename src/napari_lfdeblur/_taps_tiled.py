@@ -1,0 +1,267 @@
+"""The blur of a path with rotation as 4D tap kernels on spatial tiles.
+
+A camera rotation adds an image displacement that varies over the whole
+view (docs/model.md, "Camera rotation"): instant ``k`` samples the sharp
+light field at ``(v + s_v, u + s_u, y + t_y, x + t_x)`` with ``t_y, t_x``
+functions of both ``y`` and ``x``. Bilinearly on every axis, that is a
+16-tap kernel over integer offsets ``(a, b, c, e)`` of ``(v, y, u, x)`` at
+every pixel, and summed over the exposure the bilinear histogram of the 4D
+lookups the pixel goes through (as in :mod:`._taps4d`, which it generalises).
+
+Across a whole view the displacement spreads over several pixels (a roll
+turns the corners one way and the opposite corners the other), so one list
+of offsets for the whole view would hold many taps that most pixels never
+use. The kernel is therefore built and applied per spatial tile: each tile
+keeps only the offsets some instant uses inside it, and each of those is one
+multiply-add pass over the tile, whatever ``T``. Clamping the indices of
+the taps reproduces the model's clamped-coordinate bilinear lookup exactly.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import torch
+
+from ._taps import fold
+
+__all__ = ["rotation_displacement", "tiled_kernel", "TiledTaps", "tile_side"]
+
+_CORNERS = list(itertools.product((0, 1), repeat=4))
+
+
+def rotation_displacement(rotations: torch.Tensor, xt: torch.Tensor, yt: torch.Tensor, r: float):
+    """The image displacement of small camera rotations, in px (docs/model.md).
+
+    ``x~' = x~ + r_y (1 + x~^2) - r_x x~ y~ - r_z y~`` and
+    ``y~' = y~ - r_x (1 + y~^2) + r_y x~ y~ + r_z x~``: the rotation
+    homography to first order in the angles, exact in ``x~, y~``.
+
+    Parameters
+    ----------
+    rotations : torch.Tensor, shape (T, 3)
+        ``(r_x, r_y, r_z)`` of each instant, radians.
+    xt, yt : torch.Tensor, shapes (X,) and (Y,)
+        Normalised coordinates ``x~, y~`` of the columns and rows.
+    r : float
+        ``R`` in px, the unit of ``x~``.
+
+    Returns
+    -------
+    t_y, t_x : torch.Tensor, shape (T, Y, X)
+        ``R (y~' - y~)`` and ``R (x~' - x~)``.
+    """
+    rx, ry, rz = (rotations[:, i, None, None] for i in range(3))
+    x, y = xt[None, None, :], yt[None, :, None]
+    t_x = r * (ry * (1.0 + x * x) - rx * (x * y) - rz * y)
+    t_y = r * (-rx * (1.0 + y * y) + ry * (x * y) + rz * x)
+    return t_y, t_x
+
+
+def tile_side(shape, block_elements: int) -> int:
+    """Side of the square tiles: about ``block_elements`` padded elements each, 16 to 64 px."""
+    V, U, _, _, C = shape
+    side = math.isqrt(max(1, block_elements // max(1, (V + 2) * (U + 2) * C)))
+    return int(min(64, max(16, side)))
+
+
+def _axis_taps(shift: torch.Tensor, size: int):
+    """Integer offset ``o`` and fraction ``f`` of shifts along an axis of ``size`` samples.
+
+    Shifts beyond ``+-(size - 1)`` read only the edge sample, so they are
+    clamped there first, which bounds the number of offsets.
+    """
+    if size == 1:
+        return torch.zeros_like(shift, dtype=torch.long), torch.zeros_like(shift)
+    lim = size - 1.0
+    s = shift.clamp(-lim, lim)
+    o = torch.floor(s.detach()).clamp_(-lim, lim - 1).long()
+    return o, s - o.to(s.dtype)
+
+
+def _tile_kernel(shifts, sizes, n_times):
+    """The kernel of one tile from its per-instant shifts along (v, y, u, x).
+
+    ``shifts`` are broadcastable to ``(T, h, w)``. Returns ``K (S, h, w)``
+    and the ``(S, 4)`` integer offsets of its taps.
+    """
+    taps = [_axis_taps(s, n) for s, n in zip(shifts, sizes)]
+    full = torch.broadcast_shapes(*(o.shape for o, _ in taps))
+    offs = [o.expand(full) for o, _ in taps]
+    fracs = [f.expand(full) for _, f in taps]
+    lo = [int(o.min()) for o in offs]
+    width = [int(o.max()) - m + 2 for o, m in zip(offs, lo)]
+    base = torch.zeros(full, dtype=torch.long, device=offs[0].device)
+    for o, m, w in zip(offs, lo, width):
+        base = base * w + (o - m)
+    strides = [width[1] * width[2] * width[3], width[2] * width[3], width[3], 1]
+    delta = torch.tensor([sum(b * s for b, s in zip(bits, strides)) for bits in _CORNERS], device=base.device)
+    codes = base[..., None] + delta  # (T, h, w, 16)
+    weights = torch.stack(
+        [math.prod(f if bit else 1.0 - f for f, bit in zip(fracs, bits)) for bits in _CORNERS], dim=-1
+    )
+    # the offsets some corner touches (a zero weight still carries a gradient)
+    used = torch.zeros(math.prod(width), dtype=torch.bool, device=base.device)
+    used[codes.reshape(-1)] = True
+    active = used.nonzero().squeeze(1)
+    slot = torch.cumsum(used.long(), 0) - 1
+    h, w = full[1], full[2]
+    n_pix = h * w
+    pix = torch.arange(n_pix, device=base.device).view(1, h, w, 1)
+    index = (slot[codes] * n_pix + pix).reshape(-1)
+    K = weights.new_zeros(len(active) * n_pix).index_add(0, index, weights.reshape(-1)) / n_times
+    offsets = []
+    for m, wd in zip(lo[::-1], width[::-1]):
+        offsets.append(active % wd + m)
+        active = active // wd
+    return K.view(-1, h, w), torch.stack(offsets[::-1], dim=1)
+
+
+def tiled_kernel(s_v, s_u, t_y, t_x, shape, side: int):
+    """Per-tile 4D kernels of an exposure.
+
+    Parameters
+    ----------
+    s_v : torch.Tensor, shape (T, Y)
+        Angular shift along ``v`` of each instant at each row.
+    s_u : torch.Tensor, shape (T, X)
+        Angular shift along ``u`` at each column.
+    t_y, t_x : torch.Tensor, shape (T, Y, X)
+        Spatial shifts, px.
+    shape : tuple
+        ``(V, U, Y, X, ...)`` of the light field.
+    side : int
+        Tile side, px.
+
+    Returns
+    -------
+    K : torch.Tensor, 1D
+        The tiles' kernels, flattened one after another; differentiable in
+        the shifts.
+    layout : list of (slice, slice, int, torch.Tensor)
+        Per tile: its rows, its columns, where its ``(S, h, w)`` kernel
+        starts in ``K``, and its ``(S, 4)`` offsets of ``(v, y, u, x)``.
+    """
+    V, U, Y, X = shape[:4]
+    T = s_v.shape[0]
+    parts, layout, start = [], [], 0
+    for y0 in range(0, Y, side):
+        rows = slice(y0, min(Y, y0 + side))
+        for x0 in range(0, X, side):
+            cols = slice(x0, min(X, x0 + side))
+            shifts = (s_v[:, rows, None], t_y[:, rows, cols], s_u[:, None, cols], t_x[:, rows, cols])
+            Kt, offsets = _tile_kernel(shifts, (V, Y, U, X), T)
+            parts.append(Kt.reshape(-1))
+            layout.append((rows, cols, start, offsets))
+            start += Kt.numel()
+    return torch.cat(parts), layout
+
+
+def _clamped_range(start: int, stop: int, size: int, device):
+    """``clamp(arange(start, stop), 0, size - 1)``, the slice of distinct indices it reads and
+    how many of its entries fall below and above ``[0, size)``."""
+    index = torch.arange(start, stop, device=device).clamp_(0, size - 1)
+    src = slice(max(start, 0), min(stop, size))
+    return index, src, (max(-start, 0), max(stop - size, 0))
+
+
+def _fold_clamped(g: torch.Tensor, dim: int, pad) -> torch.Tensor:
+    """Adjoint of reading a clamped range along ``dim``: the padding adds onto the edge samples."""
+    low, high = pad
+    n = g.shape[dim] - low - high
+    out = g.narrow(dim, low, n).clone()
+    if low:
+        out.narrow(dim, 0, 1).add_(g.narrow(dim, 0, low).sum(dim, keepdim=True))
+    if high:
+        out.narrow(dim, n - 1, 1).add_(g.narrow(dim, low + n, high).sum(dim, keepdim=True))
+    return out
+
+
+class _Tile:
+    """Index vectors of one tile: its replicate-padded source region and where it folds back."""
+
+    def __init__(self, shape, rows, cols, start, offsets):
+        V, U, Y, X, _ = shape
+        dev = offsets.device
+        self.rows, self.cols, self.start = rows, cols, start
+        self.h, self.w = rows.stop - rows.start, cols.stop - cols.start
+        off = offsets.tolist()
+        lo = [min(min(o[i] for o in off), 0) for i in range(4)]
+        hi = [max(max(o[i] for o in off), 0) for i in range(4)]
+        self.taps = [(a - lo[0], b - lo[1], c - lo[2], e - lo[3]) for a, b, c, e in off]
+        self.iv = torch.arange(lo[0], V + hi[0], device=dev).clamp_(0, V - 1)
+        self.iu = torch.arange(lo[2], U + hi[2], device=dev).clamp_(0, U - 1)
+        self.iv_list, self.iu_list = self.iv.tolist(), self.iu.tolist()
+        # padded rows and columns: clamped ranges; the source region they read and the padding
+        # beyond the light field's edges (which reads the edge sample)
+        self.iy, self.src_rows, self.pad_rows = _clamped_range(rows.start + lo[1], rows.stop + hi[1], Y, dev)
+        self.ix, self.src_cols, self.pad_cols = _clamped_range(cols.start + lo[3], cols.stop + hi[3], X, dev)
+
+    def kernel(self, K):
+        n = len(self.taps)
+        return K[self.start : self.start + n * self.h * self.w].view(n, self.h, self.w)
+
+    def padded(self, T):
+        """``T`` around the tile, replicate-padded, as ``(V', U', C, h', w')``."""
+        Tb = T.index_select(2, self.iy).index_select(3, self.ix)[self.iv[:, None], self.iu[None, :]]
+        return Tb.permute(0, 1, 4, 2, 3).contiguous()
+
+    def window(self, t, tap, V, U):
+        a, b, c, e = tap
+        return t[a : a + V, c : c + U, :, b : b + self.h, e : e + self.w]
+
+
+class TiledTaps:
+    """Tile-wise application of :func:`tiled_kernel`'s kernels, their adjoint and kernel gradient.
+
+    Used through :class:`~napari_lfdeblur._taps.TapBlur` (no autograd inside).
+    """
+
+    def __init__(self, shape, K, layout):
+        self.shape = shape
+        self.K = K.detach()
+        self.tiles = [_Tile(shape, *entry) for entry in layout]
+
+    @property
+    def n_taps(self) -> float:
+        """Mean number of taps per tile: passes over the light field one forward costs."""
+        return sum(len(t.taps) for t in self.tiles) / len(self.tiles)
+
+    def forward(self, L):
+        V, U = self.shape[:2]
+        out = torch.empty_like(L)
+        for tile in self.tiles:
+            Lp = tile.padded(L)
+            Kt = tile.kernel(self.K)
+            acc = Lp.new_zeros((V, U, Lp.shape[2], tile.h, tile.w))
+            for s, tap in enumerate(tile.taps):
+                acc.addcmul_(tile.window(Lp, tap, V, U), Kt[s])
+            out[:, :, tile.rows, tile.cols] = acc.permute(0, 1, 3, 4, 2)
+        return out
+
+    def backward(self, L, G, need_L=True, need_K=False):
+        """``(adjoint(G), d<G, forward(L)>/dK)``, each None when not needed."""
+        V, U, _, _, C = self.shape
+        gL = torch.zeros_like(G) if need_L else None
+        gK = torch.zeros_like(self.K) if need_K else None
+        for tile in self.tiles:
+            Gb = G[:, :, tile.rows, tile.cols].permute(0, 1, 4, 2, 3).contiguous()
+            if need_K:
+                Lp = tile.padded(L)
+                gKt = tile.kernel(gK)
+                for s, tap in enumerate(tile.taps):
+                    gKt[s] = (Gb * tile.window(Lp, tap, V, U)).sum(dim=(0, 1, 2))
+            if need_L:
+                Kt = tile.kernel(self.K)
+                gp = Gb.new_zeros((len(tile.iv), len(tile.iu), C, len(tile.iy), len(tile.ix)))
+                for s, tap in enumerate(tile.taps):
+                    tile.window(gp, tap, V, U).addcmul_(Gb, Kt[s])
+                # adjoint of the padding: v and u (few views) by slices, y and x at the edges
+                g = fold(fold(gp, 0, tile.iv_list, V), 1, tile.iu_list, U)
+                g = _fold_clamped(_fold_clamped(g, 3, tile.pad_rows), 4, tile.pad_cols)
+                gL[:, :, tile.src_rows, tile.src_cols] += g.permute(0, 1, 3, 4, 2)
+        return gL, gK
+
+    def adjoint(self, G):
+        return self.backward(None, G, need_L=True, need_K=False)[0]
