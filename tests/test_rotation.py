@@ -1,11 +1,6 @@
 """6-DOF paths: the blur operator with camera rotation (docs/model.md, "Camera rotation")."""
 
 import numpy as np
-
-
-def rmse(a, b):
-    return float(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)))
-
 import pytest
 import torch
 
@@ -13,6 +8,10 @@ from _reference import blur_reference
 from napari_lfdeblur import simulate_blur
 from napari_lfdeblur.blur import BlurOperator
 from napari_lfdeblur.path import MAX_ROTATION, center_path, has_rotation, save_path_json, load_path_json
+
+def rmse(a, b):
+    return float(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)))
+
 
 # a generic 6-DOF path (no sample lands exactly on an integer, which is a kink of bilinear lookups)
 CP6 = np.array(
@@ -144,7 +143,7 @@ def test_6dof_path_json_round_trip(tmp_path):
 @pytest.mark.parametrize("d_inf", [0.0, 0.5])
 def test_deconvolution_with_the_true_6dof_path_beats_the_3dof_part(d_inf):
     from napari_lfdeblur import deconvolve
-        from napari_lfdeblur.samples import synthetic_scene
+    from napari_lfdeblur.samples import synthetic_scene
 
     lf, _ = synthetic_scene((5, 5, 32, 32), seed=2)
     cp = center_path(np.array([[-0.6, 0.2, 0.3, 0.02, -0.06, 0.05], [0.6, -0.3, -0.3, -0.02, 0.06, -0.05]]), 8)
