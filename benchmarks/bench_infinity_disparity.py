@@ -25,6 +25,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -37,13 +38,19 @@ import _report  # noqa: E402  (benchmarks/_report.py)
 from bench_forward import PeakRSS, _sync  # noqa: E402
 
 
-def measure(shape, n_times, d_inf, device, repeats):
-    """One ``(T, d_inf)`` point: build, forward+adjoint and forward+backward times, peak memory, taps."""
+def measure(shape, n_times, d_inf, device, repeats, rotation=None):
+    """One ``(T, d_inf)`` point: build, forward+adjoint and forward+backward times, peak memory, taps.
+
+    ``rotation``, a ``(4, 3)`` array in radians, makes the path 6-DOF.
+    """
     device = select_device(device)
     torch.manual_seed(0)
     L = torch.rand(shape, device=device)
     target = torch.rand(shape, device=device)
-    cp0 = torch.tensor(random_path(4, extent=3.0, z_extent=1.0, seed=1), dtype=torch.float32, device=device)
+    cp = random_path(4, extent=3.0, z_extent=1.0, seed=1)
+    if rotation is not None:
+        cp = np.concatenate([cp, rotation], axis=1)
+    cp0 = torch.tensor(cp, dtype=torch.float32, device=device)
     lf_bytes = L.numel() * L.element_size()
 
     def timed(fn):
