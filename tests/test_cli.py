@@ -7,7 +7,7 @@ import pytest
 
 from napari_lfdeblur import read_lightfield, simulate_blur
 from napari_lfdeblur.cli import main
-from napari_lfdeblur.path import linear_path, load_path_json, save_path_json
+from napari_lfdeblur.path import linear_path, load_path_json, preset_path, save_path_json
 
 
 @pytest.fixture
@@ -47,6 +47,9 @@ def test_simulate_with_json_path_and_no_overwrite(lf_file, tmp_path, capsys):
         (["simulate", "{src}", "o.npz", "--path", "zigzag"], "neither a JSON file nor a preset"),
         (["simulate", "{src}", "o.npz", "--path", "linear", "--n-times", "1"], "n_times"),
         (["simulate", "{src}", "o.npz", "--path", "nothere.json"], "does not exist"),
+        (["simulate", "{src}", "o.npz", "--path", "shake:1:0:0.01"], "only shake6 takes a ROTATION"),
+        (["simulate", "{src}", "o.npz", "--path", "shake6:1:0:0.5"], "rotation must be in [0, 0.2]"),
+        (["deblur", "{src}", "o.npz", "--preset", "paper", "--motion", "6dof"], "needs method='alternating'"),
     ],
 )
 def test_cli_errors_are_one_line(args, message, lf_file, tmp_path, capsys, monkeypatch):
@@ -136,3 +139,50 @@ def test_simulate_states_t_and_infinity_disparity_and_deblur_uses_it(lf_file, tm
     err = capsys.readouterr().err
     assert "as " in err and "states" in err and "infinity_disparity" in err.splitlines()[-1]
     assert not (tmp_path / "o.npz").exists()
+
+
+def test_simulate_shake6_writes_a_6_column_path(lf_file, tmp_path, capsys):
+    lf, src = lf_file
+    out = tmp_path / "b.npz"
+    assert main(["simulate", str(src), str(out), "--path", "shake6:1.5:3:0.02", "--n-times", "8"]) == 0
+    assert "6-DOF, rotation up to 20.00 mrad" in capsys.readouterr().out
+    cp = load_path_json(tmp_path / "b.path.json")
+    assert cp.shape == (5, 6) and "radians" in (tmp_path / "b.path.json").read_text()
+    np.testing.assert_allclose(cp, preset_path("shake6", 1.5, 3, rotation=0.02))
+    np.testing.assert_allclose(read_lightfield(out), simulate_blur(lf, cp, n_times=8), atol=1e-6)
+    # without ROTATION: the default rotation, still 6 columns
+    assert main(["simulate", str(src), str(tmp_path / "c.npz"), "--path", "shake6:1:3", "--n-times", "4"]) == 0
+    np.testing.assert_allclose(load_path_json(tmp_path / "c.path.json"), preset_path("shake6", 1.0, 3))
+
+
+@pytest.mark.parametrize("motion", [None, "3dof", "6dof"])
+def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, tmp_path, monkeypatch, motion):
+    from napari_lfdeblur import blind
+    from napari_lfdeblur.progress import Progress
+
+    _, src = lf_file
+    seen = {}
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+        seen["params"] = params
+        yield Progress("path", 1, 1, loss=1.0)
+        cp = preset_path("shake6", 1.0, 0)
+        return blind.BlindResult(lf, cp if params.motion == "6dof" else cp[:, :3], params=params)
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
+    params_file = tmp_path / "p.json"
+    params_file.write_text(json.dumps({"n_control_points": 5, "path": {"n_outer": 1}}))
+    args = ["deblur", str(src), str(tmp_path / "o.npz"), "--params", str(params_file), "--device", "cpu"]
+    assert main(args + (["--motion", motion] if motion else [])) == 0
+    params = seen["params"]
+    assert params.motion == (motion or "3dof") and params.n_control_points == 5 and params.path.n_outer == 1
+    doc = json.loads((tmp_path / "o_path.json").read_text())
+    assert np.shape(doc["control_points"]) == ((5, 6) if motion == "6dof" else (5, 3))
+    assert doc["motion"] == (motion or "3dof")
+
+
+def test_deblur_help_describes_motion(capsys):
+    with pytest.raises(SystemExit):
+        main(["deblur", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--motion {3dof,6dof}" in text and "slower" in text and "rotation" in text

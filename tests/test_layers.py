@@ -101,3 +101,30 @@ def test_epi_layer_data():
 def test_no_path_in_metadata():
     with pytest.raises(LayerError, match="holds no camera path"):
         control_points_from_layer(Image(np.zeros((2, 2, 4, 4)), name="x"))
+
+
+def test_6_column_path_layer_draws_the_translation_and_keeps_the_rotation(tmp_path):
+    from napari_lfdeblur._napari.reader import read_lightfield_layer
+    from napari_lfdeblur._napari.writer import write_npz
+    from napari_lfdeblur.path import load_path_json, shake6_path
+
+    cp = shake6_path(1.5, seed=2, rotation=0.01)
+    shape = (5, 5, 16, 16)
+    shapes, kw, kind = path_layer_data(cp, shape, n_times=9, true_control_points=cp[:, :3])
+    s = path_scale(shape)
+    pos = bezier_positions(cp, 9)
+    translation = np.stack([7.5 + s * pos[:, 1], 7.5 + s * pos[:, 0]], axis=1)
+    np.testing.assert_allclose(shapes[1], translation)  # the 3-column true path: the same translation
+    np.testing.assert_allclose(shapes[2], translation)
+    layer = Layer.create(shapes, kw, kind)
+    np.testing.assert_array_equal(control_points_from_layer(layer), cp)
+    assert layer.metadata["motion"] == "6dof" and 0 < layer.metadata["max_rotation_rad"] <= 0.01
+    assert "rotation" in layer.metadata["frame"]
+    # a light field's metadata keeps the 6 columns, through the writer and the reader too
+    meta = lightfield_metadata(kind="blurred", control_points=cp, n_times=9)
+    lf = Image(np.zeros((2, 2, 4, 4), np.float32), metadata=meta)
+    np.testing.assert_array_equal(control_points_from_layer(lf), cp)
+    written = write_npz(str(tmp_path / "b"), lf.data, {"name": "b", "metadata": meta})
+    np.testing.assert_allclose(load_path_json(written[1]), cp)
+    (_, kw_read, _), = read_lightfield_layer(written[0])
+    np.testing.assert_allclose(kw_read["metadata"]["control_points"], cp)

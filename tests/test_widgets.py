@@ -538,3 +538,103 @@ def test_path_table_rows_can_be_added_and_removed(make_napari_viewer):
     w.table.remove_button.clicked.emit()
     w.table.remove_button.clicked.emit()  # two points at least
     np.testing.assert_allclose(w.table.control_points(), [[0, 0, 0], [1, 2, 0]])
+
+
+# ------------------------------------------------------ 6-DOF paths
+
+
+def test_path_table_rotation_columns_round_trip(make_napari_viewer, tmp_path, notifications):
+    from napari_lfdeblur._napari.widgets import DeconvolveWidget
+    from napari_lfdeblur.path import save_path_json, shake6_path
+
+    viewer = make_napari_viewer()
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    table = w.table
+    assert not table.rotation.value and table.table.column_headers[-1] == "p_z (views/x~)"
+    cp6 = shake6_path(1.0, seed=4, rotation=0.01)
+    save_path_json(tmp_path / "p6.json", cp6)
+    w.path_source.json_file.value = tmp_path / "p6.json"  # a 6-column file ticks the box
+    assert table.rotation.value and table.table.column_headers[3:] == ("r_x (rad)", "r_y (rad)", "r_z (rad)")
+    np.testing.assert_allclose(table.control_points(), cp6, atol=1e-6)
+    assert w.plot.ax_rot is not None and len(w.plot.ax_rot.lines) == 3  # rotation panel, mrad
+    assert "mrad" in w.plot.ax_rot.get_ylabel()
+    table.rotation.value = False  # hidden ...
+    np.testing.assert_allclose(table.control_points(), cp6[:, :3], atol=1e-6)
+    assert w.plot.ax_rot is None
+    table.rotation.value = True  # ... and shown again
+    np.testing.assert_allclose(table.control_points(), cp6, atol=1e-6)
+    table.add_button.clicked.emit()
+    assert table.control_points().shape == (6, 6)
+    # a 3-column file unticks it
+    save_path_json(tmp_path / "p3.json", cp6[:, :3])
+    w.path_source.json_file.value = tmp_path / "p3.json"
+    assert not table.rotation.value and table.control_points().shape == (5, 3)
+    # ticking it on a 3-column path adds zero rotations
+    table.rotation.value = True
+    np.testing.assert_allclose(table.control_points()[:, 3:], 0.0)
+    assert not [n for n in notifications if n[0] == "error"], notifications
+
+
+def test_simulate_shake6_preset_and_a_too_large_rotation(make_napari_viewer, qtbot, lf, notifications):
+    from napari_lfdeblur._napari.widgets import SimulateBlurWidget
+    from napari_lfdeblur.path import preset_path
+
+    viewer = make_napari_viewer()
+    viewer.add_image(lf, name="sharp")
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    f = w.path_form
+    assert "shake6" in f.preset.choices
+    f.preset.value, f.extent.value, f.seed.value, f.rotation.value = "shake6", 1.0, 3, 0.01
+    f.apply_preset.clicked.emit()
+    expected = preset_path("shake6", 1.0, 3, rotation=0.01)
+    np.testing.assert_allclose(w.table.control_points(), expected, atol=1e-6)
+    w.form.n_times.value = 4
+    assert [layer.name for layer in w.run_and_wait(timeout=60)] == ["sharp blurred", "sharp blurred path"]
+    assert not [n for n in notifications if n[0] == "error"], notifications
+    cp = np.asarray(viewer.layers["sharp blurred"].metadata["control_points"])
+    assert cp.shape == (5, 6)
+    np.testing.assert_allclose(viewer.layers["sharp blurred"].data, simulate_blur(lf, cp, n_times=4), atol=1e-6)
+    assert np.shape(viewer.layers["sharp blurred path"].metadata["control_points"]) == (5, 6)
+    # a rotation beyond 0.2 rad: a notification naming the cell, no traceback, no layer
+    w.table.table.native.item(1, 4).setText("0.3")
+    assert w.run() is None
+    kind, msg = notifications[-1]
+    assert kind == "error" and "control point 2, r_y" in msg and "0.2 rad" in msg
+    assert len(viewer.layers) == 3
+
+
+def test_blind_motion_choice_reaches_the_params_and_6dof_results_display(make_napari_viewer, monkeypatch, lf,
+                                                                         notifications):
+    import napari_lfdeblur.blind as blind_core
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+    from napari_lfdeblur.path import preset_path
+    from napari_lfdeblur.progress import Progress
+
+    cp6 = preset_path("shake6", 1.0, 0, rotation=0.01)[:4]
+    seen = {}
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+        seen["params"] = params
+        yield Progress("path", 1, 2, loss=1.0, control_points=cp6)
+        return blind_core.BlindResult(lf, cp6, loss_history=[1.0], params=params)
+
+    monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
+    viewer = make_napari_viewer()
+    layer, _ = _blind_layer(viewer, lf)
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    assert w.form.motion.value == "3dof" and "slower" in w.form.motion.tooltip.lower()
+    w.form.motion.value = "6dof"
+    names = [layer.name for layer in w.run_and_wait(timeout=60)]
+    assert not [n for n in notifications if n[0] == "error"], notifications
+    assert seen["params"].motion == "6dof"
+    assert names == ["b deblurred (blind)", "b estimated path"]
+    np.testing.assert_allclose(viewer.layers["b estimated path"].metadata["control_points"], cp6)
+    assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["motion"] == "6dof"
+    assert w.plot.ax_rot is not None and len(w.plot.ax_rot.lines) == 3  # estimate only: the true path is 3-DOF
+    # the paper preset (joint method) cannot estimate a rotation: a clear note, no run
+    w.form.preset.value = "paper"
+    assert w.form.motion.value == "3dof"  # the preset's motion
+    w.form.motion.value = "6dof"
+    assert w.run() is None
+    assert notifications[-1][0] == "error" and "6-DOF motion needs the alternating method" in notifications[-1][1]

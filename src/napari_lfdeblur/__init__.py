@@ -26,6 +26,7 @@ _PUBLIC = {
     "linear_path": "path",
     "arc_path": "path",
     "shake_path": "path",
+    "shake6_path": "path",
     "random_path": "path",
     "preset_path": "path",
     "save_path_json": "path",

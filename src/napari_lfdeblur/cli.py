@@ -76,7 +76,10 @@ def _read(args, **options):
 
 
 def _path_argument(text: str, n_times: int | None = None):
-    """Control points from ``--path``: a JSON file, or ``PRESET[:EXTENT[:SEED]]``."""
+    """Control points from ``--path``: a JSON file, or ``PRESET[:EXTENT[:SEED[:ROTATION]]]``.
+
+    ``ROTATION`` (radians) is for ``shake6`` only.
+    """
     from .path import PRESETS, load_path_json, preset_path
 
     if Path(text).suffix.lower() == ".json" or Path(text).exists():
@@ -85,14 +88,29 @@ def _path_argument(text: str, n_times: int | None = None):
     if name not in PRESETS:
         raise CLIError(
             f"--path {text!r} is neither a JSON file nor a preset; presets: {', '.join(sorted(PRESETS))} "
-            "(e.g. linear:3 for a 3-view linear motion, random:2:7 for seed 7)"
+            "(e.g. linear:3 for a 3-view linear motion, random:2:7 for seed 7, shake6:2:7:0.01 for a shake "
+            "with rotations up to 0.01 rad)"
         )
+    if len(rest) > (3 if name == "shake6" else 2):
+        form = "shake6[:EXTENT[:SEED[:ROTATION]]]" if name == "shake6" else "PRESET[:EXTENT[:SEED]]"
+        raise CLIError(f"--path {text!r}: expected {form} (only shake6 takes a ROTATION)")
     try:
         extent = float(rest[0]) if rest else 2.0
         seed = int(rest[1]) if len(rest) > 1 else 0
+        rotation = float(rest[2]) if len(rest) > 2 else None
     except ValueError:
-        raise CLIError(f"--path {text!r}: expected PRESET[:EXTENT[:SEED]]") from None
-    return preset_path(name, extent=extent, seed=seed)
+        raise CLIError(f"--path {text!r}: expected PRESET[:EXTENT[:SEED]] or shake6:EXTENT:SEED:ROTATION") from None
+    return preset_path(name, extent=extent, seed=seed, rotation=rotation)
+
+
+def _rotation_note(cp) -> str:
+    """`` (6-DOF, rotation up to X mrad)`` for a path with rotation columns, else ``''``."""
+    import numpy as np
+
+    cp = np.asarray(cp)
+    if cp.ndim != 2 or cp.shape[1] != 6:
+        return ""
+    return f" (6-DOF, rotation up to {1000 * float(np.abs(cp[:, 3:]).max()):.2f} mrad)"
 
 
 # ------------------------------------------------------------- simulate
@@ -105,8 +123,10 @@ def _add_simulate(sub):
     p.add_argument(
         "--path",
         required=True,
-        help="camera path: a JSON file of control points, or PRESET[:EXTENT[:SEED]] "
-        "with PRESET one of linear, arc, shake, random",
+        help="camera path: a JSON file of control points ((n, 3), or (n, 6) with a rotation), or "
+        "PRESET[:EXTENT[:SEED]] with PRESET one of linear, arc, shake, shake6, random; EXTENT in views. "
+        "shake6 is shake plus a random camera rotation (handheld shake), written shake6[:EXTENT[:SEED[:ROTATION]]] "
+        "with ROTATION the largest rotation in radians (default 0.005, at most 0.2)",
     )
     p.add_argument("--n-times", type=int, default=32, help="exposure instants T (default 32)")
     p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
@@ -129,7 +149,7 @@ def _run_simulate(args):
     written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp,
                                metadata={"kind": "blurred", "n_times": args.n_times,
                                          "infinity_disparity": args.infinity_disparity})
-    print(f"wrote {written} {blurred.shape}, with its camera path, T and d_inf beside it")
+    print(f"wrote {written} {blurred.shape}, with its camera path{_rotation_note(cp)}, T and d_inf beside it")
 
 
 # ---------------------------------------------------------------- deblur
@@ -150,6 +170,11 @@ def _add_deblur(sub):
                         "farthest content (sky, a far wall); the blind solver cannot estimate it (see "
                         "docs/blind.md)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--motion", choices=["3dof", "6dof"], default=None,
+                   help="camera motion to estimate (BlindParams.motion; default: the preset's or --params', "
+                        "3dof). 3dof: translation only, an (n, 3) path. 6dof: a rotation stage follows, for "
+                        "handheld shake, and the path is (n, 6) with (r_x, r_y, r_z) in radians; slower "
+                        "(alternating method only)")
     p.add_argument("--edge-anisotropy", type=float, metavar="PX",
                    help="how much softer the camera's views are along x than along y, px "
                         "(BlindParams.latent.edge_anisotropy; default: the preset's, 0)")
@@ -198,6 +223,8 @@ def _run_deblur(args):
         params = params.replace(latent={"edge_anisotropy": args.edge_anisotropy})
     if args.restore_anyway:
         params = params.replace(require_evidence=False)
+    if args.motion is not None:
+        params = params.replace(motion=args.motion)
     lf, meta = _read(args)
     d_inf = _stated_infinity_disparity(args.infinity_disparity, meta, args.input)
     gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=args.device, seed=args.seed)
@@ -216,11 +243,11 @@ def _run_deblur(args):
     write_lightfield(out, result.lightfield, overwrite=args.overwrite,
                      metadata={"kind": "deblurred (blind)", "infinity_disparity": d_inf})
     save_path_json(path_file, result.control_points, overwrite=True, n_times=params.n_times,
-                   infinity_disparity=d_inf, preset=args.preset if not args.params else None,
+                   infinity_disparity=d_inf, preset=args.preset if not args.params else None, motion=params.motion,
                    timings=result.timings)
     if "message" in result.info:
         print(result.info["message"])
-    print(f"wrote {out} {result.lightfield.shape} and its path {path_file} "
+    print(f"wrote {out} {result.lightfield.shape} and its path {path_file}{_rotation_note(result.control_points)} "
           f"({result.timings.get('total', float('nan')):.1f} s)")
 
 

@@ -32,6 +32,7 @@ __all__ = [
     "linear_path",
     "arc_path",
     "shake_path",
+    "shake6_path",
     "random_path",
     "preset_path",
     "PRESETS",
@@ -300,25 +301,87 @@ def random_path(
     return center_path(cp)
 
 
+def shake6_path(
+    extent: float = 2.0, seed: int | None = 0, n_points: int = 5, rotation: float = 0.005, z: float = 0.0
+) -> np.ndarray:
+    """A handheld shake with camera rotation: :func:`shake_path` plus a random rotation.
+
+    The translation is that of ``shake_path(extent, seed, n_points, z)``.
+    The rotation control points ``(r_x, r_y, r_z)`` are drawn uniformly in
+    ``[-rotation, rotation]`` radians (from a random stream independent of
+    the translation's), moved to zero mean and, when that pushed one beyond
+    ``rotation``, scaled back within it. A hand holds a camera to a few
+    tenths of a degree: the default 0.005 rad moves the image by about
+    ``0.005 R`` px, ``R = max(Y, X) / 2`` (docs/model.md, "Camera rotation").
+
+    Parameters
+    ----------
+    extent : float
+        Size of the translation, views.
+    seed : int or None
+        Random seed of both the translation and the rotation.
+    n_points : int
+        Control points (>= 2).
+    rotation : float
+        Largest rotation of a control point, radians, in
+        ``[0, MAX_ROTATION]``.
+    z : float
+        Size of the out-of-plane motion ``p_z``.
+
+    Returns
+    -------
+    ndarray, float64, shape (n_points, 6), in the zero-mean gauge for T = 32
+
+    Raises
+    ------
+    ValueError
+        If ``rotation`` is negative or beyond ``MAX_ROTATION``.
+    """
+    rotation = float(rotation)
+    if not 0.0 <= rotation <= MAX_ROTATION:
+        raise ValueError(f"rotation must be in [0, {MAX_ROTATION}] rad; got {rotation:g}")
+    translation = shake_path(extent=extent, seed=seed, n_points=n_points, z=z)
+    rng = np.random.default_rng(None if seed is None else [int(seed), 6])
+    rot = rng.uniform(-rotation, rotation, size=(n_points, 3))
+    rot = center_path(np.concatenate([np.zeros_like(rot), rot], axis=1))[:, 3:]
+    largest = np.abs(rot).max()
+    if largest > rotation:
+        rot *= rotation / largest  # still zero-mean: the mean is linear
+    return np.concatenate([translation, rot], axis=1)
+
+
 PRESETS = {
     "linear": linear_path,
     "arc": arc_path,
     "shake": shake_path,
+    "shake6": shake6_path,
     "random": random_path,
 }
 
 
-def preset_path(name: str, extent: float = 2.0, seed: int = 0) -> np.ndarray:
-    """A named preset path (``linear``, ``arc``, ``shake`` or ``random``).
+def preset_path(name: str, extent: float = 2.0, seed: int = 0, rotation: float | None = None) -> np.ndarray:
+    """A named preset path (``linear``, ``arc``, ``shake``, ``shake6`` or ``random``).
 
-    ``extent`` is the motion's size in views.
+    ``extent`` is the motion's size in views. ``shake6`` is ``shake`` with
+    a camera rotation of at most ``rotation`` radians (default 0.005), an
+    ``(n, 6)`` path; the other presets are ``(n, 3)`` and take no rotation.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, or a ``rotation`` given to a preset other than
+        ``shake6``.
     """
+    if rotation is not None and name != "shake6":
+        raise ValueError(f"path preset {name!r} has no rotation; use shake6 for a path with rotation")
     if name == "linear":
         return linear_path(length=extent)
     if name == "arc":
         return arc_path(length=extent)
     if name == "shake":
         return shake_path(extent=extent, seed=seed)
+    if name == "shake6":
+        return shake6_path(extent=extent, seed=seed, rotation=0.005 if rotation is None else rotation)
     if name == "random":
         return random_path(extent=extent, seed=seed)
     raise ValueError(f"unknown path preset {name!r}: choose one of {sorted(PRESETS)}")

@@ -15,7 +15,8 @@ Light field
         'napari_lfdeblur_version'  the package version that made it
         'kind'                     'blurred', 'deconvolved', 'blind', 'preview', ...
         'parameters'               dict of the parameters of the operation
-        'control_points'           list of [p_x, p_y, p_z] (the path used / found)
+        'control_points'           list of [p_x, p_y, p_z] (the path used / found),
+                                   or [p_x, p_y, p_z, r_x, r_y, r_z] with rotation
         'n_times', 'infinity_disparity', 'source_layer'
         'loss_history', 'timings'  (blind results)
 
@@ -38,10 +39,13 @@ Camera path
     ``u_c`` in ``[-(U-1)/2, (U-1)/2]`` and ``v_c`` in ``[-(V-1)/2, (V-1)/2]``;
     it fills about half the image, whatever the sizes. The path, sampled at the
     ``T`` exposure instants, is a polyline (yellow for an estimate, cyan for
-    the true path), with a small dot at ``t = 0``. ``p_z`` is not drawn; the
-    widgets plot ``p_x``, ``p_y`` and ``p_z`` against ``t``. ``metadata``
-    holds ``'control_points'``, ``'n_times'``, ``'pixels_per_view'`` and
-    ``'frame'`` (a sentence saying the above).
+    the true path), with a small dot at ``t = 0``. ``p_z`` is not drawn, nor
+    the rotation ``(r_x, r_y, r_z)`` of an ``(n, 6)`` path; the widgets plot
+    every coordinate against ``t``. ``metadata`` holds ``'control_points'``
+    (all 6 columns of a path with rotation), ``'n_times'``,
+    ``'pixels_per_view'``, ``'frame'`` (a sentence saying the above) and,
+    for a path with rotation columns, ``'motion': '6dof'`` and
+    ``'max_rotation_rad'`` (the largest ``|r|`` along the path).
 """
 
 from __future__ import annotations
@@ -75,7 +79,8 @@ LF_AXIS_LABELS = ("v", "u", "y", "x")
 PATH_FRAME = (
     "2D overlay on the centre view: (p_x, p_y) in views drawn at pixel "
     "((Y-1)/2 + s*p_y, (X-1)/2 + s*p_x) with s = min(Y, X) / (2 * max(U, V)) px/view; "
-    "grey rectangle = the aperture"
+    "grey rectangle = the aperture; p_z and a rotation (r_x, r_y, r_z, rad) are not drawn "
+    "(see control_points)"
 )
 
 
@@ -154,8 +159,9 @@ def lightfield_metadata(
 ) -> dict:
     """The ``metadata`` dict of a light-field layer made by this plugin.
 
-    ``control_points`` is stored as a list of ``[p_x, p_y, p_z]`` lists (JSON
-    friendly); the package version goes in ``'napari_lfdeblur_version'``.
+    ``control_points`` is stored as a list of ``[p_x, p_y, p_z]`` lists, or of
+    6-element lists with the rotation (JSON friendly); the package version
+    goes in ``'napari_lfdeblur_version'``.
     """
     meta: dict[str, Any] = {
         "napari_lfdeblur_version": napari_lfdeblur.__version__,
@@ -210,7 +216,7 @@ def control_points_from_layer(layer) -> np.ndarray:
 
     Returns
     -------
-    ndarray, float64, shape (n, 3)
+    ndarray, float64, shape (n, 3), or (n, 6) for a path with rotation
 
     Raises
     ------
@@ -238,6 +244,7 @@ def path_scale(shape) -> float:
 
 
 def _path_polyline(cp, shape, n_times, s):
+    """The translation ``(p_x, p_y)`` of a 3- or 6-column path at ``n_times`` instants, in pixels."""
     V, U, Y, X = tuple(shape)[:4]
     pos = bezier_positions(cp, n_times)
     return np.stack([(Y - 1) / 2 + s * pos[:, 1], (X - 1) / 2 + s * pos[:, 0]], axis=1)
@@ -256,13 +263,14 @@ def path_layer_data(
 
     Parameters
     ----------
-    control_points : array_like, shape (n, 3)
-        The (estimated or simulated) path.
+    control_points : array_like, shape (n, 3) or (n, 6)
+        The (estimated or simulated) path. Its translation is drawn; a
+        rotation is kept in the metadata (and plotted by the widgets).
     lf_shape : tuple
         ``(V, U, Y, X[, C])`` of the light field it belongs to.
     n_times : int
         Number of exposure instants at which the curve is sampled.
-    true_control_points : array_like, shape (m, 3), optional
+    true_control_points : array_like, shape (m, 3) or (m, 6), optional
         A known true path, drawn in cyan.
 
     Returns
@@ -304,6 +312,10 @@ def path_layer_data(
         "lightfield_shape": [V, U, Y, X],
         "frame": PATH_FRAME,
     }
+    if cp.shape[1] == 6:
+        path_positions = bezier_positions(cp, n_times)
+        meta["motion"] = "6dof"
+        meta["max_rotation_rad"] = float(np.abs(path_positions[:, 3:]).max())
     if true_control_points is not None:
         meta["true_control_points"] = validate_control_points(true_control_points).tolist()
     meta.update(metadata or {})

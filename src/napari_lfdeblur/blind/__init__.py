@@ -4,7 +4,7 @@
 motion-blurred light field and returns both the sharp light field and the 3D
 camera path (docs/model.md units, zero-mean gauge), with no depth estimation.
 Parameters are a :class:`BlindParams`, nested by stage
-(:class:`LatentParams`, :class:`PathFitParams`, :class:`JointParams` and the
+(:class:`LatentParams`, :class:`PathFitParams`, :class:`RotationFitParams`, :class:`JointParams` and the
 final stage's :class:`~napari_lfdeblur.deconvolution.DeconvolutionParams`);
 :data:`PRESETS` names two of them.
 
@@ -47,7 +47,11 @@ Two algorithms, chosen by :attr:`BlindParams.method`:
     5. with ``path.estimate_z``, a last stage frees ``p_z``, starting from
        the in-plane path;
     6. with ``d_inf != 0`` the path is estimated on the light field refocused
-       by ``d_inf`` (which turns the model into the one with ``d_inf = 0``).
+       by ``d_inf`` (which turns the model into the one with ``d_inf = 0``);
+    7. with ``motion='6dof'`` a rotation stage follows: the translation
+       found, with zero rotation, starts an alternation of the salient-edge
+       latent and Adam on all six coordinates through the exact operator
+       (:class:`RotationFitParams`; docs/blind.md, "Camera rotation").
 
 ``'joint'`` (the ``paper`` preset)
     The paper's blind stage as published: Adam on the control points and
@@ -100,7 +104,8 @@ from ._evidence import blur_evidence, evidence_message
 from ._joint import iter_joint
 from ._memory import TILE_MARGIN, estimate_blind_memory, plan_tiles, tiles
 from ._region import choose_region
-from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams
+from ._rotation import iter_rotation_fit
+from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams, RotationFitParams
 
 #: why ``infinity_disparity='auto'`` is refused (docs/blind.md, "Where d_inf comes from")
 AUTO_MESSAGE = (
@@ -113,6 +118,7 @@ __all__ = [
     "BlindParams",
     "LatentParams",
     "PathFitParams",
+    "RotationFitParams",
     "JointParams",
     "BlindResult",
     "PRESETS",
@@ -360,15 +366,18 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
 
     if p.method == "alternating":
         est = yield from iter_alternating(g, p, dev, rng, box, preview)
+        if p.motion == "6dof":  # its path is in the frame's coordinates
+            est = yield from iter_rotation_fit(g, est, p, dev, window, (Y, X), box)
     else:
         est = yield from iter_joint(g, d_inf, p, dev, rng, box, preview)
     info = {"device": str(dev), "box": box, "window": window, **est.info}
     info["levels"] = [(g.shape[2] // k, g.shape[3] // k) for k in est.factors]
-    evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev)
+    frame = (window[0], window[1], Y, X) if p.motion == "6dof" else None
+    evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev, frame)
     info.update(blur_found=evidence["blur_found"], evidence=evidence,
                 message=evidence_message(evidence, p.require_evidence))
     restore = evidence["blur_found"] or not p.require_evidence
-    cp = path_in_frame(est.control_points, window, (Y, X))  # the window's x~ -> the frame's
+    cp = est.control_points if frame else path_in_frame(est.control_points, window, (Y, X))  # window -> frame
     if not restore:  # the path estimated, kept for inspection; the result has no blur
         info["rejected_path"] = canonical_time_direction(center_path(cp, p.n_times))
         cp = np.zeros_like(cp)
@@ -386,7 +395,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
                        params=p, timings={"path": t1 - t0, "final": t2 - t1, "total": t2 - t0}, info=info)
 
 
-def _iter_evidence(g, est, p: BlindParams, dev):
+def _iter_evidence(g, est, p: BlindParams, dev, frame=None):
     """Is the estimated blur significant? :func:`~napari_lfdeblur.blind._evidence.blur_evidence`, with progress.
 
     ``g`` is the grayscale light field of the path stage in the ``d_inf = 0``
@@ -399,7 +408,7 @@ def _iter_evidence(g, est, p: BlindParams, dev):
         return Progress(stage="evidence", iteration=0, n_iterations=1, loss=float("nan"),
                         control_points=cp, stage_index=est.n_stages, n_stages=est.n_stages + 1)
 
-    return (yield from relay(blur_evidence(g, cp, p, dev), report))
+    return (yield from relay(blur_evidence(g, cp, p, dev, frame), report))
 
 
 def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):

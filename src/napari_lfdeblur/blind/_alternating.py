@@ -80,7 +80,7 @@ class _Alternation:
         self.disparity: dict = {}  # level factor -> pixel weights of the fit
 
     def record(self, stage, fac, it, cur, latent, loss=float("nan"), **extra) -> Progress:
-        n_stages = len(self.stages)
+        n_stages = len(self.stages) + (self.p.motion == "6dof")  # then the rotation stage
         estimate = None
         if self.preview is not None:
             def estimate(latent=latent, fac=fac):

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from .._tv_solvers import estimate_noise_sigma
-from ..blur import BlurOperator
+from ..blur import BlurOperator, image_shifts
 from ..path import bezier_positions
 from ..priors import gradient_yx
 from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
@@ -56,17 +56,20 @@ def noise_sigma(g: torch.Tensor) -> float:
     return estimate_noise_sigma(g.detach().cpu().numpy())
 
 
-def blur_reach(cp, n_times: int, g: torch.Tensor) -> float:
+def blur_reach(cp, n_times: int, g: torch.Tensor, frame=None) -> float:
     """Largest image motion (px) of the blur of path ``cp`` in ``g`` (V, U, Y, X, 1), ``d_inf = 0`` model.
 
     A point at disparity ``d`` moves by ``(d - d_inf) s`` px when the camera
     moves by ``s`` views (docs/model.md): the path's in-plane extent (views)
     times the 95th percentile of ``|d|`` (``g`` is refocused by ``d_inf``)
     over the pixels with the stronger half of the gradients, where the
-    disparity is measured (a flat region has none).
+    disparity is measured (a flat region has none). A rotation (``cp`` of 6
+    columns) adds the largest range of its image displacement over the
+    exposure at any pixel of ``g`` (placed in ``frame``, as in
+    :class:`~napari_lfdeblur.blur.BlurOperator`).
     """
-    pos = bezier_positions(np.asarray(cp, dtype=np.float64), n_times)[:, :2]
-    extent = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
+    pos = bezier_positions(np.asarray(cp, dtype=np.float64), n_times)
+    extent = float(np.linalg.norm(pos[:, :2].max(axis=0) - pos[:, :2].min(axis=0)))
     Y, X = g.shape[2:4]
     k = max(1, int(math.sqrt(Y * X / DISPARITY_PIXELS)))
     small = downsample(g, k)
@@ -74,7 +77,12 @@ def blur_reach(cp, n_times: int, g: torch.Tensor) -> float:
     gy, gx = gradient_yx(small.mean(dim=(0, 1))[None, None])
     mag = (gy * gy + gx * gx)[0, 0, ..., 0].cpu().numpy()
     textured = mag >= np.median(mag)
-    return extent * k * float(np.percentile(d[textured], 95))  # disparities of the k-times smaller image
+    reach = extent * k * float(np.percentile(d[textured], 95))  # disparities of the k-times smaller image
+    if pos.shape[1] == 6:
+        t_y, t_x = image_shifts(torch.as_tensor(pos), tuple(g.shape), frame)
+        span = torch.sqrt((t_y.amax(0) - t_y.amin(0)) ** 2 + (t_x.amax(0) - t_x.amin(0)) ** 2)
+        reach += float(span.max())
+    return reach
 
 
 def evidence_message(evidence: dict, required: bool = True) -> str:
@@ -111,8 +119,11 @@ def _objective(op, g, lam, p: BlindParams):
     return float((r * r).sum()) / n, edges / n
 
 
-def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device):
+def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device, frame=None):
     """Evidence for the blur of path ``cp`` in the grayscale (V, U, Y, X, 1) ``g`` (``d_inf = 0`` model).
+
+    ``frame`` places ``g`` in a larger view, as in
+    :class:`~napari_lfdeblur.blur.BlurOperator` (it matters for rotation).
 
     ``E = |K l - g|^2 / N + lam * edges / N`` of the salient-edge latent
     (``lam`` the smallest weight of the alternation) is computed with
@@ -130,13 +141,13 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device):
     """
     sigma = max(noise_sigma(g), 1e-4)
     lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
-    op = BlurOperator(tuple(g.shape), cp, n_times=p.n_times, infinity_disparity=0.0, device=device)
+    op = BlurOperator(tuple(g.shape), cp, n_times=p.n_times, infinity_disparity=0.0, device=device, frame=frame)
     m_blur, e_blur = yield from _objective(op, g, lam, p)
     m_none, e_none = yield from _objective(Identity(), g, lam, p)
     e0, e1 = m_none + lam * e_none, m_blur + lam * e_blur
     gain = (e0 - e1) / sigma**2
     relative = (e0 - e1) / max(e0, 1e-30)
-    reach = blur_reach(cp, p.n_times, g)
+    reach = blur_reach(cp, p.n_times, g, frame)
     found = bool(gain > EVIDENCE_MARGIN and relative > RELATIVE_MARGIN and reach >= MIN_REACH)
     return {"sigma": sigma, "misfit_blur": m_blur, "misfit_none": m_none, "edges_blur": e_blur,
             "edges_none": e_none, "gain": gain, "relative": relative, "reach": reach,

@@ -9,10 +9,11 @@ import numpy as np
 from .._params import JsonParams, check_float, check_int
 from ..deconvolution import DeconvolutionParams
 
-__all__ = ["METHODS", "LatentParams", "PathFitParams", "JointParams", "BlindParams", "BlindResult", "PRESETS",
-           "PathEstimate"]
+__all__ = ["METHODS", "MOTIONS", "LatentParams", "PathFitParams", "RotationFitParams", "JointParams", "BlindParams",
+           "BlindResult", "PRESETS", "PathEstimate"]
 
 METHODS = ("alternating", "joint")
+MOTIONS = ("3dof", "6dof")
 
 
 def _check(obj, prefix: str, ints=None, nonneg=(), positive=(), signed=(), unit=(), bools=()) -> None:
@@ -213,6 +214,34 @@ class PathFitParams(JsonParams):
 
 
 @dataclass(frozen=True)
+class RotationFitParams(JsonParams):
+    """The rotation stage of ``motion='6dof'`` (docs/blind.md, "Camera rotation"). Frozen.
+
+    Attributes
+    ----------
+    n_outer : int
+        Alternations of the salient-edge latent and the 6-DOF path fit.
+    steps : int
+        Adam steps of the path fit per alternation.
+    lr : float
+        Adam's step: views for the translation, px of image motion
+        (``R r``) for the rotation.
+    n_times : int
+        Exposure instants of the model during the stage.
+    """
+
+    n_outer: int = 4
+    steps: int = 40
+    lr: float = 0.05
+    n_times: int = 16
+
+    _what = "blind rotation fit"
+
+    def __post_init__(self):
+        _check(self, "BlindParams.rotation", ints={"n_outer": 1, "steps": 1, "n_times": 2}, positive=("lr",))
+
+
+@dataclass(frozen=True)
 class JointParams(JsonParams):
     """The paper's joint Adam, the ``'joint'`` method (:attr:`BlindParams.joint`).
 
@@ -253,7 +282,7 @@ def _default_final() -> DeconvolutionParams:
     return DeconvolutionParams(method="tv")  # weight from the noise, stops on the objective
 
 
-_NESTED = {"latent": LatentParams, "path": PathFitParams, "joint": JointParams}
+_NESTED = {"latent": LatentParams, "path": PathFitParams, "rotation": RotationFitParams, "joint": JointParams}
 
 
 @dataclass(frozen=True)
@@ -269,6 +298,10 @@ class BlindParams(JsonParams):
     method : {'alternating', 'joint'}
         ``'alternating'``: salient-edge latent / path alternation, coarse to
         fine. ``'joint'``: the paper's joint Adam.
+    motion : {'3dof', '6dof'}
+        ``'3dof'``: the camera translates (``(n, 3)`` paths). ``'6dof'``: it
+        may rotate too; a rotation stage follows the translation's estimate
+        and the path is ``(n, 6)`` (``'alternating'`` only).
     n_control_points : int
         Control points of the estimated Bezier path (>= 2).
     n_times : int
@@ -283,6 +316,8 @@ class BlindParams(JsonParams):
         The salient-edge latent (``'alternating'``).
     path : PathFitParams
         The path fit and its schedule (``'alternating'``).
+    rotation : RotationFitParams
+        The rotation stage (``motion='6dof'``).
     joint : JointParams
         The joint Adam (``'joint'``).
     final : DeconvolutionParams or None
@@ -297,12 +332,14 @@ class BlindParams(JsonParams):
     """
 
     method: str = "alternating"
+    motion: str = "3dof"
     n_control_points: int = 4
     n_times: int = 32
     max_extent: float = 0.0
     final_n_times: int = 32
     latent: LatentParams = field(default_factory=LatentParams)
     path: PathFitParams = field(default_factory=PathFitParams)
+    rotation: RotationFitParams = field(default_factory=RotationFitParams)
     joint: JointParams = field(default_factory=JointParams)
     final: DeconvolutionParams | None = field(default_factory=_default_final)
     require_evidence: bool = True
@@ -314,6 +351,10 @@ class BlindParams(JsonParams):
             raise TypeError(f"BlindParams.method must be a string; got {self.method!r}")
         if self.method not in METHODS:
             raise ValueError(f"unknown blind method {self.method!r}: choose one of {', '.join(METHODS)}")
+        if self.motion not in MOTIONS:
+            raise ValueError(f"unknown motion {self.motion!r}: choose one of {', '.join(MOTIONS)}")
+        if self.motion == "6dof" and self.method != "alternating":
+            raise ValueError("motion='6dof' needs method='alternating'")
         _check(self, "BlindParams", ints={"n_control_points": 2, "n_times": 2, "final_n_times": 2},
                nonneg=("max_extent",), bools=("require_evidence",))
         for name, cls in _NESTED.items():
@@ -356,7 +397,7 @@ class BlindResult:
     ----------
     lightfield : ndarray, float32, the blurred input's shape
         The sharp light field seen from the path's mean position.
-    control_points : ndarray, float64, shape (n, 3)
+    control_points : ndarray, float64, shape (n, 3), or (n, 6) with ``motion='6dof'``
         The camera path (docs/model.md units), zero-mean gauge for
         ``params.n_times`` (hence for any number of instants, up to
         sampling), time-canonicalised.
@@ -389,7 +430,7 @@ class PathEstimate:
 
     Attributes
     ----------
-    control_points : ndarray, float64, shape (n_control_points, 3)
+    control_points : ndarray, float64, shape (n_control_points, 3) or (n_control_points, 6)
     factors : list of int
         The pyramid's downsampling factors, coarse to fine.
     n_stages : int

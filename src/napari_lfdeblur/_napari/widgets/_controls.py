@@ -3,7 +3,8 @@
 - :func:`spin`, :func:`fspin`, :func:`device_choice`: value widgets with the
   plugin's ranges and tooltips;
 - :class:`LayerChoice`: a combo box of the viewer's layers, kept in sync with it;
-- :class:`PathTable`: an editable ``(n, 3)`` table of Bezier control points;
+- :class:`PathTable`: an editable ``(n, 3)`` (``(n, 6)`` with rotation) table of
+  Bezier control points;
 - :class:`PathSource`: take a path from another layer or a JSON file;
 - :func:`heading`: a section heading;
 - ``notify_*``: napari notifications.
@@ -14,16 +15,17 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox, Table
+from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox, Table
 from napari.utils.notifications import show_error, show_info, show_warning
 
-from ...path import load_path_json, validate_control_points
+from ...path import MAX_ROTATION, load_path_json, validate_control_points
 from ..layers import LayerError, control_points_from_layer, layer_kind
 
 log = logging.getLogger(__name__)
 
 __all__ = [
     "DEVICES",
+    "ROTATION_COLUMNS",
     "LayerChoice",
     "PathSource",
     "PathTable",
@@ -153,49 +155,85 @@ class LayerChoice(ComboBox):
 # ------------------------------------------------------------------ path
 
 COLUMNS = ("p_x (views)", "p_y (views)", "p_z (views/x~)")
+#: the three more columns of a path with camera rotation (docs/model.md, "Camera rotation")
+ROTATION_COLUMNS = ("r_x (rad)", "r_y (rad)", "r_z (rad)")
+_NAMES = ("p_x", "p_y", "p_z", "r_x", "r_y", "r_z")
 
 
 class PathTable(Container):
-    """An editable table of Bezier control points ``(p_x, p_y, p_z)``, one per row.
+    """An editable table of Bezier control points, one per row.
 
-    Its ``changed`` signal fires when a cell is edited or the points are set.
+    The columns are ``(p_x, p_y, p_z)``; ticking *rotation* adds ``(r_x,
+    r_y, r_z)`` in radians (an ``(n, 6)`` path: pitch, yaw and roll, each
+    within :data:`~napari_lfdeblur.path.MAX_ROTATION`). Unticking it hides
+    the rotation columns (they come back if it is ticked again with as many
+    rows). Its ``changed`` signal fires when a cell is edited, the points
+    are set or the rotation columns are shown or hidden.
     """
 
     def __init__(self, control_points=None, name: str = "path_table"):
         self.table = Table(name="table", tooltip="Bezier control points of the camera path "
                            "(units: docs/model.md); edit freely")
         self.table.min_height = 110
-        header = self.table.native.horizontalHeader()
-        header.setSectionResizeMode(header.ResizeMode.Stretch)
         self.add_button = PushButton(name="add_point", text="+ point")
         self.remove_button = PushButton(name="remove_point", text="- point")
+        self.rotation = CheckBox(name="rotation", text="rotation", value=False, tooltip=(
+            "add the camera rotation r_x (pitch), r_y (yaw), r_z (roll) in radians, each at most "
+            f"{MAX_ROTATION} rad; handheld shake is a few mrad (0.005 rad moves the image by about "
+            "0.005 max(Y, X) / 2 px)"))
+        self._hidden_rotation = None
+        self._syncing = False
         self.add_button.changed.connect(self._add_row)
         self.remove_button.changed.connect(self._remove_row)
-        buttons = Container(layout="horizontal", widgets=[self.add_button, self.remove_button], labels=False)
+        self.rotation.changed.connect(self._toggle_rotation)
+        buttons = Container(layout="horizontal", widgets=[self.add_button, self.remove_button, self.rotation],
+                            labels=False)
         buttons.margins = (0, 0, 0, 0)
         super().__init__(name=name, widgets=[self.table, buttons], labels=False)
         self.margins = (0, 0, 0, 0)
         self.set_control_points(np.zeros((2, 3)) if control_points is None else control_points)
 
+    @property
+    def n_columns(self) -> int:
+        """3, or 6 when the rotation columns are shown."""
+        return 6 if self.rotation.value else 3
+
     def _set_rows(self, rows) -> None:
         rows = [list(r) for r in rows]
+        columns = COLUMNS + ROTATION_COLUMNS if self.rotation.value else COLUMNS
         # rows are numbered from 1, like the points in error messages
-        self.table.value = {"data": rows, "index": list(range(1, len(rows) + 1)), "columns": list(COLUMNS)}
+        self.table.value = {"data": rows, "index": list(range(1, len(rows) + 1)), "columns": list(columns)}
+        # 3 columns share the width; 6 take what their numbers need (scrolling sideways in a narrow dock)
+        header = self.table.native.horizontalHeader()
+        header.setSectionResizeMode(header.ResizeMode.ResizeToContents if len(columns) > 3
+                                    else header.ResizeMode.Stretch)
+        header.setStretchLastSection(len(columns) > 3)
+        self.table.min_height = 130 if len(columns) > 3 else 110  # room for the sideways scroll bar
         self.changed.emit(self)
 
     def set_control_points(self, control_points) -> None:
-        """Fill the table with an ``(n, 3)`` array (shown to 6 significant digits)."""
+        """Fill the table with an ``(n, 3)`` or ``(n, 6)`` array (shown to 6 significant digits).
+
+        The *rotation* box follows the array's width.
+        """
         cp = validate_control_points(control_points)
+        self._syncing = True
+        try:
+            self.rotation.value = cp.shape[1] == 6
+        finally:
+            self._syncing = False
+        self._hidden_rotation = None
         # no '-0' or '1e-17' in the table
         self._set_rows([[0.0 if abs(v) < 1e-9 else float(f"{v:.6g}") for v in row] for row in cp])
 
     def control_points(self) -> np.ndarray:
-        """The table as a float64 ``(n, 3)`` array.
+        """The table as a float64 ``(n, 3)`` array, or ``(n, 6)`` when *rotation* is ticked.
 
         Raises
         ------
         ValueError
-            On an empty or non-numeric cell, or fewer than 2 rows.
+            On an empty or non-numeric cell, a rotation beyond
+            ``MAX_ROTATION``, or fewer than 2 rows.
         """
         rows = []
         for i, cells in enumerate(self.table.data.to_list()):
@@ -204,15 +242,33 @@ class PathTable(Container):
                 try:
                     row.append(float(cell))
                 except (TypeError, ValueError):
+                    raise ValueError(f"control point {i + 1}, {_NAMES[j]}: {cell!r} is not a number") from None
+                if j >= 3 and abs(row[-1]) > MAX_ROTATION:
                     raise ValueError(
-                        f"control point {i + 1}, column {'xyz'[j]}: {cell!r} is not a number"
-                    ) from None
+                        f"control point {i + 1}, {_NAMES[j]}: {row[-1]:g} rad is beyond the largest rotation, "
+                        f"{MAX_ROTATION} rad ({np.degrees(MAX_ROTATION):.1f} degrees); rotations are in radians"
+                    )
             rows.append(row)
-        return validate_control_points(np.array(rows, dtype=np.float64).reshape(-1, 3))
+        return validate_control_points(np.array(rows, dtype=np.float64).reshape(-1, self.n_columns))
+
+    def _toggle_rotation(self, *_):
+        """Show (restoring hidden values, else zeros) or hide the rotation columns."""
+        if self._syncing:
+            return
+        rows = [list(r) for r in self.table.data.to_list()]
+        if self.rotation.value:
+            hidden = self._hidden_rotation
+            if hidden is None or len(hidden) != len(rows):
+                hidden = [[0.0, 0.0, 0.0] for _ in rows]
+            rows = [r[:3] + list(h) for r, h in zip(rows, hidden)]
+        else:
+            self._hidden_rotation = [r[3:6] for r in rows]
+            rows = [r[:3] for r in rows]
+        self._set_rows(rows)
 
     def _add_row(self, *_):
         rows = self.table.data.to_list()
-        self._set_rows(rows + [list(rows[-1]) if rows else [0.0, 0.0, 0.0]])
+        self._set_rows(rows + [list(rows[-1]) if rows else [0.0] * self.n_columns])
 
     def _remove_row(self, *_):
         rows = self.table.data.to_list()

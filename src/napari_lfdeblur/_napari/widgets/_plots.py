@@ -1,6 +1,7 @@
 """Small matplotlib plots for the dock widgets, each its own magicgui widget.
 
-- :class:`PathPlot`: ``p_x``, ``p_y``, ``p_z`` of a camera path against ``t``;
+- :class:`PathPlot`: ``p_x``, ``p_y``, ``p_z`` of a camera path against ``t``
+  (and ``r_x``, ``r_y``, ``r_z`` in a second panel for a path with rotation);
 - :class:`LossPlot`: the objective against iteration.
 
 During a run they are redrawn with ``live=True``: drawn at once and without
@@ -17,16 +18,19 @@ from ...path import bezier_positions, validate_control_points
 
 __all__ = ["PathPlot", "LossPlot"]
 
+#: dots per inch of the plots (the canvas height in px is the figure's height times this)
+_DPI = 90
+
 
 def _figure_canvas(width=3.2, height=1.9):
     from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
     from matplotlib.figure import Figure
     from qtpy.QtWidgets import QSizePolicy
 
-    fig = Figure(figsize=(width, height), dpi=90, layout="constrained")
+    fig = Figure(figsize=(width, height), dpi=_DPI, layout="constrained")
     canvas = FigureCanvasQTAgg(fig)
     canvas.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Fixed)
-    canvas.setFixedHeight(int(height * 90))
+    canvas.setFixedHeight(int(height * _DPI))
     return fig, canvas
 
 
@@ -49,42 +53,83 @@ class _PlotWidget(Container):
         self.native.layout().addWidget(self.canvas)
         self.margins = (0, 0, 0, 0)
 
-    def _finish(self, xlabel: str, ylabel: str, live: bool) -> None:
-        ax = self.ax
+    @staticmethod
+    def _style(ax, xlabel: str, ylabel: str) -> None:
         ax.set_xlabel(xlabel, fontsize=8)
         ax.set_ylabel(ylabel, fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
+
+    def _finish(self, xlabel: str, ylabel: str, live: bool) -> None:
+        self._style(self.ax, xlabel, ylabel)
         _redraw(self.figure, self.canvas, live)
 
 
-class PathPlot(_PlotWidget):
-    """``p_x``, ``p_y``, ``p_z`` against ``t``: the path (solid) and a true one (dashed)."""
+def _positions(cps, n_times: int):
+    """The path's positions at ``n_times`` instants, or None when ``cps`` is None or not a path."""
+    if cps is None:
+        return None
+    try:
+        return bezier_positions(validate_control_points(cps), n_times)
+    except ValueError:
+        return None
 
-    COLORS = {"p_x": "tab:red", "p_y": "tab:green", "p_z": "tab:blue"}
+
+class PathPlot(_PlotWidget):
+    """The path against ``t``: the path (solid) and a true one (dashed).
+
+    The top axes (``ax``) show ``p_x``, ``p_y``, ``p_z`` in views. When
+    either path has rotation columns, a second axes (``ax_rot``, else None)
+    below shows ``r_x``, ``r_y``, ``r_z`` in milliradians.
+    """
+
+    COLORS = {"p_x": "tab:red", "p_y": "tab:green", "p_z": "tab:blue",
+              "r_x": "tab:orange", "r_y": "tab:olive", "r_z": "tab:purple"}
+    HEIGHT = 1.9
+    ROTATION_HEIGHT = 1.5
 
     def __init__(self, name: str = "path_plot"):
-        super().__init__(name, height=1.9)
+        super().__init__(name, height=self.HEIGHT)
+        self.ax_rot = None
         self.plot(None)
+
+    def _set_panels(self, rotation: bool) -> None:
+        """One axes, or two (translation above, rotation below) when ``rotation``."""
+        if rotation == (self.ax_rot is not None):
+            return
+        self.figure.clear()
+        if rotation:
+            self.ax, self.ax_rot = self.figure.subplots(2, 1, sharex=True)
+        else:
+            self.ax, self.ax_rot = self.figure.add_subplot(111), None
+        height = self.HEIGHT + (self.ROTATION_HEIGHT if rotation else 0.0)
+        self.figure.set_figheight(height, forward=False)
+        self.canvas.setFixedHeight(int(height * _DPI))
 
     def plot(self, control_points, true_control_points=None, n_times: int = 64, live: bool = False) -> None:
         """Redraw; either path may be None. ``live``: a quick redraw during a run."""
-        ax = self.ax
-        ax.clear()
         t = np.linspace(0, 1, max(2, n_times))
-        for cps, style, tag in ((true_control_points, "--", "true"), (control_points, "-", "")):
-            if cps is None:
+        paths = [(_positions(cps, len(t)), style, tag)
+                 for cps, style, tag in ((true_control_points, "--", "true"), (control_points, "-", ""))]
+        self._set_panels(any(pos is not None and pos.shape[1] == 6 for pos, _, _ in paths))
+        axes = [self.ax] if self.ax_rot is None else [self.ax, self.ax_rot]
+        for ax in axes:
+            ax.clear()
+        for pos, style, tag in paths:
+            if pos is None:
                 continue
-            try:
-                pos = bezier_positions(validate_control_points(cps), len(t))
-            except ValueError:
-                continue
-            for j, key in enumerate(("p_x", "p_y", "p_z")):
-                label = f"{key} {tag}".strip()
-                ax.plot(t, pos[:, j], style, color=self.COLORS[key], lw=1.4, label=label)
-        if ax.lines:
-            ax.legend(fontsize=6, ncol=2, loc="best")
-        self._finish("t", "views", live)
+            for j, key in enumerate(("p_x", "p_y", "p_z", "r_x", "r_y", "r_z")[: pos.shape[1]]):
+                ax, scale = (self.ax, 1.0) if j < 3 else (self.ax_rot, 1000.0)
+                ax.plot(t, scale * pos[:, j], style, color=self.COLORS[key], lw=1.4, label=f"{key} {tag}".strip())
+        for ax in axes:
+            if ax.lines:
+                ax.legend(fontsize=6, ncol=2, loc="best")
+        if self.ax_rot is not None:
+            self._style(self.ax, "", "views")
+            self._style(self.ax_rot, "t", "rotation (mrad)")
+        else:
+            self._style(self.ax, "t", "views")
+        _redraw(self.figure, self.canvas, live)
 
 
 class LossPlot(_PlotWidget):

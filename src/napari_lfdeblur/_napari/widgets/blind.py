@@ -3,7 +3,9 @@
 A thin shell over :func:`napari_lfdeblur.blind.iter_blind_deblur`, run in a
 napari ``thread_worker``. Its magicgui form (``form``) holds the input
 ``layer``, the solver ``preset`` (choosing one shows its values in the
-fields below), ``n_control_points``, ``n_iter`` (path iterations),
+fields below), ``motion`` (3-DOF translation, or 6-DOF with a camera
+rotation: an ``(n, 6)`` path, plotted in a second panel),
+``n_control_points``, ``n_iter`` (path iterations),
 ``tv_iter`` (final TV iterations), ``device``, ``seed``,
 ``infinity_disparity``, ``edge_anisotropy``, ``preview_every`` and an
 optional ``true_path`` layer. While it runs:
@@ -63,15 +65,26 @@ def _iteration_field(params) -> tuple[str, str]:
     return ("joint", "n_iter") if params.method == "joint" else ("path", "n_outer")
 
 
-def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: int, edge_anisotropy: float):
-    """``BlindParams`` of a preset with the form's values (``tv_iter`` 0: no final solve)."""
+def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: int, edge_anisotropy: float,
+                 motion: str = "3dof"):
+    """``BlindParams`` of a preset with the form's values (``tv_iter`` 0: no final solve).
+
+    Raises
+    ------
+    ValueError
+        On values the parameters refuse (``motion='6dof'`` with the joint
+        method of the 'paper' preset, say).
+    """
     from ...blind import BlindParams
 
     params = BlindParams.preset(preset)
+    if motion == "6dof" and params.method != "alternating":
+        raise ValueError(f"6-DOF motion needs the alternating method (the 'default' preset); the {preset!r} "
+                         f"preset's {params.method!r} method estimates translation only")
     stage, field = _iteration_field(params)
     return params.replace(
-        n_control_points=n_control_points, final=None if tv_iter == 0 else {"n_iter": tv_iter}, latent={"edge_anisotropy": edge_anisotropy},
-        **{stage: {field: n_iter}},
+        n_control_points=n_control_points, final=None if tv_iter == 0 else {"n_iter": tv_iter},
+        latent={"edge_anisotropy": edge_anisotropy}, motion=motion, **{stage: {field: n_iter}},
     )
 
 
@@ -82,7 +95,8 @@ def _preset_values(preset: str) -> dict:
     p = BlindParams.preset(preset)
     stage, field = _iteration_field(p)
     return {"n_control_points": p.n_control_points, "n_iter": getattr(getattr(p, stage), field),
-            "tv_iter": 0 if p.final is None else p.final.n_iter, "edge_anisotropy": p.latent.edge_anisotropy}
+            "tv_iter": 0 if p.final is None else p.final.n_iter, "edge_anisotropy": p.latent.edge_anisotropy,
+            "motion": p.motion}
 
 
 def _fields(viewer) -> list:
@@ -92,6 +106,11 @@ def _fields(viewer) -> list:
     return [
         ComboBox(name="preset", choices=list(PRESETS), value="default",
                  tooltip="solver parameter preset (BlindParams.preset)"),
+        ComboBox(name="motion", choices=[("3-DOF (translation)", "3dof"), ("6-DOF (+ rotation)", "6dof")],
+                 value="3dof", label="camera motion",
+                 tooltip="3-DOF: the camera translates, an (n, 3) path. 6-DOF: for handheld shake; a rotation "
+                 "stage (r_x, r_y, r_z, radians) follows the translation's estimate, an (n, 6) path. Slower; "
+                 "'default' preset (alternating method) only (BlindParams.motion)"),
         spin("n_control_points", 4, 2, 12, label="control points",
              tooltip="control points of the estimated Bezier path"),
         spin("n_iter", 8, 1, 100000, label="path iterations", tooltip="path iterations: alternations "
@@ -188,7 +207,8 @@ class BlindDeblurWidget(SolverWidget):
 
         f = self.form
         params = _make_params(f.preset.value, n_control_points=f.n_control_points.value, n_iter=f.n_iter.value,
-                              tv_iter=f.tv_iter.value, edge_anisotropy=f.edge_anisotropy.value)
+                              tv_iter=f.tv_iter.value, edge_anisotropy=f.edge_anisotropy.value,
+                              motion=f.motion.value)
         settings = {"preset": f.preset.value, "device": f.device.value, "seed": f.seed.value,
                     "infinity_disparity": f.infinity_disparity.value}
         gen = iter_blind_deblur(lf, infinity_disparity=settings["infinity_disparity"], params=params,

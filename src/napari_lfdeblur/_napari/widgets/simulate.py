@@ -2,9 +2,10 @@
 
 A thin shell over :func:`napari_lfdeblur.simulate_blur`. The form (magicgui,
 ``form``) holds the input ``layer``, ``n_times``, ``infinity_disparity`` and
-``device``; the path is edited in a table of control points (``table``),
-filled from a preset (linear, arc, shake) or a random path with a seed
-(``path_form``). Running it adds:
+``device``; the path is edited in a table of control points (``table``; its
+*rotation* box adds the columns ``r_x, r_y, r_z`` in radians), filled from a
+preset (linear, arc, shake, shake6: a shake with camera rotation) or a
+random path with a seed (``path_form``). Running it adds:
 
 - ``'<source> blurred'``: the blurred light field (metadata: the path in
   ``'control_points'``, ``'n_times'``, ``'infinity_disparity'``, the
@@ -18,7 +19,7 @@ from __future__ import annotations
 
 from magicgui.widgets import ComboBox, Container, PushButton
 
-from ...path import preset_path, random_path
+from ...path import MAX_ROTATION, preset_path, random_path
 from ...progress import Progress
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata, path_layer_data
 from ._controls import PathTable, device_choice, fspin, heading, spin
@@ -32,11 +33,16 @@ __all__ = ["SimulateBlurWidget"]
 def _path_form() -> Container:
     """Preset and random-path fields of the *Camera path* section."""
     return Container(name="path_form", widgets=[
-        ComboBox(name="preset", choices=["linear", "arc", "shake"], value="linear"),
+        ComboBox(name="preset", choices=["linear", "arc", "shake", "shake6"], value="linear",
+                 tooltip="linear, arc, shake (a random wiggle) or shake6 (a shake with camera rotation, "
+                 "as a handheld camera: a 6-column path)"),
         fspin("extent", 2.0, 0.0, 50.0, 0.25, tooltip="size of the motion, in views"),
+        fspin("rotation", 0.005, 0.0, MAX_ROTATION, 0.0005, label="rotation (rad)",
+              tooltip="largest camera rotation of the shake6 preset, radians (handheld: a few thousandths; "
+              "0.005 rad moves the image by about 0.005 max(Y, X) / 2 px)"),
         PushButton(name="apply_preset", text="Apply preset"),
         spin("n_points", 4, 2, 12, label="points", tooltip="control points of the random path"),
-        spin("seed", 0, 0, 2**31 - 1, tooltip="random seed (random path and shake preset)"),
+        spin("seed", 0, 0, 2**31 - 1, tooltip="random seed (random path and shake presets)"),
         PushButton(name="random", text="Random path"),
     ])
 
@@ -67,9 +73,11 @@ class SimulateBlurWidget(SolverWidget):
 
     # ------------------------------------------------------------ path
     def apply_preset(self, *_):
-        """Fill the table with the chosen preset of the chosen extent."""
+        """Fill the table with the chosen preset of the chosen extent (and rotation, for shake6)."""
         f = self.path_form
-        self.table.set_control_points(preset_path(f.preset.value, extent=f.extent.value, seed=f.seed.value))
+        rotation = f.rotation.value if f.preset.value == "shake6" else None
+        self.table.set_control_points(preset_path(f.preset.value, extent=f.extent.value, seed=f.seed.value,
+                                                  rotation=rotation))
 
     def apply_random(self, *_):
         """Fill the table with a random path (points, extent and seed from the form)."""
