@@ -155,3 +155,40 @@ def test_deconvolution_with_the_true_6dof_path_beats_the_3dof_part(d_inf):
     # measured: 0.48 and 0.49 of the blurred input's error; without the rotation 0.95 and 0.92
     assert rmse(out, lf) < 0.6 * rmse(blurred, lf)
     assert rmse(out, lf) < 0.7 * rmse(out3, lf)
+
+
+def test_blind_6dof_lowers_the_error_where_3dof_finds_nothing():
+    from napari_lfdeblur import blind_deblur
+    from napari_lfdeblur.blind import BlindParams
+    from napari_lfdeblur.samples import synthetic_scene
+
+    lf, _ = synthetic_scene((7, 7, 48, 48), color=True, seed=1)
+    rng = np.random.default_rng(1)
+    rot = rng.uniform(-1, 1, (3, 3)) * 1.5 / 24  # up to 1.5 px of image motion at the centre
+    trans = rng.uniform(-0.5, 0.5, (3, 3))
+    trans[:, 2] = 0
+    cp = center_path(np.concatenate([trans, rot], axis=1), 32)
+    blurred = (simulate_blur(lf, cp) + rng.normal(0, 0.002, lf.shape)).astype(np.float32)
+    quick = dict(path={"n_outer": 3, "n_random": 100, "n_random_later": 50, "steps": 150},
+                 rotation={"n_outer": 2, "steps": 30})
+    r6 = blind_deblur(blurred, params=BlindParams(motion="6dof").replace(**quick), device="cpu", seed=0)
+    assert r6.control_points.shape == (4, 6) and r6.info["blur_found"]
+    # measured: 0.76 of the input's error; the 3-DOF solver finds no significant blur (1.0)
+    assert rmse(r6.lightfield, lf) < 0.85 * rmse(blurred, lf)
+    r3 = blind_deblur(blurred, params=BlindParams().replace(**{"path": quick["path"]}), device="cpu", seed=0)
+    assert r3.control_points.shape == (4, 3)
+    assert rmse(r6.lightfield, lf) < 0.9 * rmse(r3.lightfield, lf)
+
+
+def test_rotation_equivalent_blurs_a_plane_like_the_translation():
+    from _reference import moving_texture
+    from napari_lfdeblur.blind._rotation import rotation_equivalent
+
+    d, r = 1.0, 32.0
+    lf = moving_texture(n_views=5, d=d, size=64)
+    trans = np.array([[0.0, 0.0, 0.0], [1.2, 0.3, 0.0], [0.4, -0.9, 0.0]])  # curved: no time-reversal symmetry
+    by_translation = simulate_blur(lf, trans, n_times=16)
+    by_rotation = simulate_blur(lf, rotation_equivalent(trans, d, r), n_times=16)
+    centre = (2, 2, slice(24, 40), slice(24, 40))
+    # measured: 0.0007 mean difference against a blur of 0.021
+    assert np.abs(by_translation - by_rotation)[centre].mean() < 0.1 * np.abs(by_translation - lf)[centre].mean()

@@ -233,7 +233,7 @@ class RotationFitParams(JsonParams):
     n_outer: int = 4
     steps: int = 40
     lr: float = 0.05
-    n_times: int = 16
+    n_times: int = 8
 
     _what = "blind rotation fit"
 

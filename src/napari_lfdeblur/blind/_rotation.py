@@ -18,22 +18,30 @@ on a single plane it finds some mixture that blurs alike.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 
 from ..blur import BlurOperator
-from ..path import MAX_ROTATION, bernstein_matrix, path_in_frame
+from ..path import MAX_ROTATION, bernstein_matrix, bezier_positions, path_in_frame
 from ..priors import gradient_yx
 from ..progress import Progress
 from ._alternating import relay
+from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
 from ._latent import EdgeBlurred, edge_sigmas, l0_latent, n_hqs_steps
 from ._params import BlindParams, PathEstimate
 
-__all__ = ["iter_rotation_fit"]
+__all__ = ["iter_rotation_fit", "dominant_disparity", "rotation_equivalent"]
 
 
 def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device, window, frame_shape, box: float):
     """Refine a 3-DOF estimate into a 6-DOF path on the grayscale ``g`` (V, U, h, w, 1), ``d_inf = 0`` model.
+
+    Two starts each get one alternation: the translation found with zero
+    rotation, and the same motion explained by rotation alone
+    (:func:`rotation_equivalent`). The better fit goes on for the
+    remaining ``p.rotation.n_outer - 1`` alternations.
 
     Parameters
     ----------
@@ -54,41 +62,89 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
         With ``(n, 6)`` control points in the frame's coordinates, one more
         stage, and the fits of the stage appended to the loss history.
         A generator: yields a :class:`~napari_lfdeblur.progress.Progress`
-        record per conjugate-gradient iteration of the latent and per
-        ``FIT_REPORT_EVERY`` path steps.
+        record per conjugate-gradient iteration of the latent and every 10
+        path steps.
     """
-    rp = p.rotation
-    y0, x0 = window[:2]
-    frame = (y0, x0, *frame_shape)
-    r_px = max(frame_shape) / 2.0
-    cp = path_in_frame(est.control_points, window, frame_shape)
-    cp = np.concatenate([cp, np.zeros((len(cp), 3))], axis=1)
-    lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
-    sigma = edge_sigmas(p.latent)
-    stage, n_stages = est.n_stages, est.n_stages + 2  # then the evidence and the final stage
-    per_outer = n_hqs_steps(lam, p.latent) * (p.latent.n_cg + 1) + rp.steps
-    tick = [0]
+    run = _Stage(g, p, device, window, frame_shape, box, est.n_stages)
+    cp3 = path_in_frame(est.control_points, window, frame_shape)
+    starts = [np.concatenate([cp3, np.zeros((len(cp3), 3))], axis=1)]
+    disparity = dominant_disparity(g)
+    if abs(disparity) * run.extent(cp3) >= 0.1:  # the translation moves the image: try it as a rotation
+        starts.append(rotation_equivalent(cp3, disparity, run.r_px))
+    tried = []
+    for cp in starts:
+        tried.append((yield from run.alternation(cp, g.clone())))
+    cp, latent, loss = min(tried, key=lambda t: t[2])
+    history = [min(t[2] for t in tried)]
+    for _ in range(p.rotation.n_outer - 1):
+        cp, latent, loss = yield from run.alternation(cp, latent)
+        history.append(loss)
+    info = {**est.info, "rotation_fit": history, "rotation_start_fits": [t[2] for t in tried]}
+    return PathEstimate(cp, est.factors, est.n_stages + 1, est.loss_history + history, info)
 
-    def record(cur, loss, phase):
-        tick[0] += 1
-        return Progress(stage=f"rotation ({g.shape[2]}x{g.shape[3]})", iteration=min(tick[0], rp.n_outer * per_outer),
-                        n_iterations=rp.n_outer * per_outer, loss=loss, control_points=np.array(cur),
-                        stage_index=stage, n_stages=n_stages, info={"phase": phase})
 
-    latent, history = g.clone(), []
-    for _ in range(rp.n_outer):
-        op = EdgeBlurred(BlurOperator(tuple(g.shape), cp, n_times=rp.n_times, frame=frame, device=device), sigma)
-        latent = yield from relay(l0_latent(op, g, lam, p.latent, latent),
-                                  lambda _x, cp=cp: record(cp, float("nan"), "latent"))
-        fit = _Fit(g, latent, sigma, frame, rp, r_px, box, cp, device)
+def dominant_disparity(g: torch.Tensor) -> float:
+    """Median disparity (px/view) of the better-textured half of ``g`` (V, U, Y, X, 1)."""
+    Y, X = g.shape[2:4]
+    k = max(1, int(math.sqrt(Y * X / DISPARITY_PIXELS)))
+    small = downsample(g, k)
+    d = disparity_map(small)
+    gy, gx = gradient_yx(small.mean(dim=(0, 1))[None, None])
+    mag = (gy * gy + gx * gx)[0, 0, ..., 0].cpu().numpy()
+    return k * float(np.median(d[mag >= np.median(mag)]))
+
+
+def rotation_equivalent(cp3: np.ndarray, disparity: float, r_px: float) -> np.ndarray:
+    """A rotation-only ``(n, 6)`` path that moves a plane at ``disparity`` like the translation ``cp3``.
+
+    Translating by ``p_x`` views moves the image of a plane at disparity
+    ``d`` by ``-d p_x`` px; a yaw ``r_y`` moves the centre of every view by
+    ``R r_y`` px. So ``r_y = -d p_x / R`` and, likewise, ``r_x = d p_y / R``.
+    """
+    out = np.zeros((len(cp3), 6))
+    out[:, 3] = disparity * cp3[:, 1] / r_px
+    out[:, 4] = -disparity * cp3[:, 0] / r_px
+    out[:, 3:] = np.clip(out[:, 3:], -MAX_ROTATION, MAX_ROTATION)
+    return out
+
+
+class _Stage:
+    """One rotation stage: its alternations (latent, then path fit) and progress records."""
+
+    def __init__(self, g, p: BlindParams, device, window, frame_shape, box, stage):
+        self.g, self.p, self.device, self.box = g, p, device, box
+        self.frame = (window[0], window[1], *frame_shape)
+        self.r_px = max(frame_shape) / 2.0
+        self.lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
+        self.sigma = edge_sigmas(p.latent)
+        self.stage, self.n_stages = stage, stage + 2  # then the evidence and the final stage
+        rp = p.rotation
+        per_outer = n_hqs_steps(self.lam, p.latent) * (p.latent.n_cg + 1) + rp.steps // 10 + 1
+        self.n_records = (rp.n_outer + 1) * per_outer
+        self.tick = 0
+
+    def extent(self, cp) -> float:
+        pos = bezier_positions(cp, self.p.rotation.n_times)[:, :2]
+        return float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
+
+    def record(self, cp, loss, phase) -> Progress:
+        self.tick = min(self.tick + 1, self.n_records)
+        return Progress(stage=f"rotation ({self.g.shape[2]}x{self.g.shape[3]})", iteration=self.tick,
+                        n_iterations=self.n_records, loss=loss, control_points=np.array(cp),
+                        stage_index=self.stage, n_stages=self.n_stages, info={"phase": phase})
+
+    def alternation(self, cp, latent):
+        """The latent under ``cp``, then the path fitted to it; returns ``(cp, latent, fit)``."""
+        rp = self.p.rotation
+        op = BlurOperator(tuple(self.g.shape), cp, n_times=rp.n_times, frame=self.frame, device=self.device)
+        latent = yield from relay(l0_latent(EdgeBlurred(op, self.sigma), self.g, self.lam, self.p.latent, latent),
+                                  lambda _x: self.record(cp, float("nan"), "latent"))
+        fit = _Fit(self.g, latent, self.sigma, self.frame, rp, self.r_px, self.box, cp, self.device)
         for step in range(1, rp.steps + 1):
             loss = fit.step()
             if step % 10 == 0 or step == rp.steps:
-                yield record(fit.control_points(), loss, "path fit")
-        cp = fit.control_points()
-        history.append(loss)
-    info = {**est.info, "rotation_fit": history}
-    return PathEstimate(cp, est.factors, est.n_stages + 1, est.loss_history + history, info)
+                yield self.record(fit.control_points(), loss, "path fit")
+        return fit.control_points(), latent, loss
 
 
 class _Fit:
