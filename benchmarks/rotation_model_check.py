@@ -57,26 +57,6 @@ DISPARITIES = (-0.5, -1.0, -1.5)
 WAVELENGTHS_PX = (6.0, 12.0)
 
 
-def motion_paths(magnitude: float) -> dict[str, np.ndarray]:
-    """Bezier control points ``(n, 6)`` of the four motions, rotations of about ``magnitude`` rad.
-
-    Every path starts at the identity pose (the sharp light field's) and is
-    curved, so that its mean pose is not its midpoint.
-    """
-    m = magnitude
-    zero = np.zeros((3, 6))
-    yaw, pitch, roll = zero.copy(), zero.copy(), zero.copy()
-    yaw[:, 4] = (0.0, m, 0.4 * m)
-    pitch[:, 3] = (0.0, -m, -0.3 * m)
-    roll[:, 5] = (0.0, m, 0.5 * m)
-    mixed = np.array([
-        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [0.6, -0.3, 0.4, 0.5 * m, m, -0.5 * m],
-        [0.3, 0.4, -0.2, -0.7 * m, 0.2 * m, 0.8 * m],
-    ])
-    return {"yaw": yaw, "pitch": pitch, "roll": roll, "mixed": mixed}
-
-
 def model_coordinates(variant: str, pose, shape):
     """Where one instant of a model variant reads the sharp light field.
 
@@ -174,7 +154,7 @@ def measure_case(motion: str, n_views: int, radius: int, magnitude: float, n_tim
     """Interior relative errors of every variant for one motion, size and magnitude."""
     shape = (n_views, n_views, 2 * radius, 2 * radius)
     scene = _raytrace.make_scene(radius, disparities=DISPARITIES, wavelengths_px=WAVELENGTHS_PX)
-    cp = motion_paths(magnitude)[motion]
+    cp = _raytrace.motion_paths(magnitude)[motion]
     sharp = _raytrace.render(scene, shape)
     truth = _raytrace.render_blur(scene, shape, cp, n_times)
     margins = _raytrace.path_margins(cp, shape, n_times)
@@ -243,7 +223,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     sizes = SIZES[:1] if args.smoke else SIZES
     magnitudes = MAGNITUDES[-1:] if args.smoke else MAGNITUDES
-    motions = ("mixed",) if args.smoke else tuple(motion_paths(0.0))
+    motions = ("mixed",) if args.smoke else tuple(_raytrace.motion_paths(0.0))
     lines = table_header()
     print("\n".join(lines), flush=True)
     start = time.perf_counter()

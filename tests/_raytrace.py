@@ -303,3 +303,23 @@ def interior_error(estimate, blurred, sharp, view_margin: int, pixel_margin: int
              slice(pixel_margin, Y - pixel_margin), slice(pixel_margin, X - pixel_margin))
     est, ref, base = (np.asarray(a, dtype=np.float64)[inner] for a in (estimate, blurred, sharp))
     return float(np.linalg.norm(est - ref) / np.linalg.norm(ref - base))
+
+
+def motion_paths(magnitude: float) -> dict[str, np.ndarray]:
+    """Bezier control points ``(n, 6)`` of the four motions, rotations of about ``magnitude`` rad.
+
+    Every path starts at the identity pose (the sharp light field's) and is
+    curved, so that its mean pose is not its midpoint.
+    """
+    m = magnitude
+    zero = np.zeros((3, 6))
+    yaw, pitch, roll = zero.copy(), zero.copy(), zero.copy()
+    yaw[:, 4] = (0.0, m, 0.4 * m)
+    pitch[:, 3] = (0.0, -m, -0.3 * m)
+    roll[:, 5] = (0.0, m, 0.5 * m)
+    mixed = np.array([
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.6, -0.3, 0.4, 0.5 * m, m, -0.5 * m],
+        [0.3, 0.4, -0.2, -0.7 * m, 0.2 * m, 0.8 * m],
+    ])
+    return {"yaw": yaw, "pitch": pitch, "roll": roll, "mixed": mixed}

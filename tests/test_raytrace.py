@@ -22,6 +22,7 @@ from _raytrace import (
     bernstein_matrix,
     interior_error,
     make_scene,
+    motion_paths,
     path_margins,
     render,
     render_blur,
@@ -116,21 +117,6 @@ def test_translation_matches_ray_tracer(scene, sharp, name):
 # --------------------------------------------------------------------------- rotation
 
 
-def _rotation_paths(m):
-    """Curved (n, 6) paths from the identity pose: yaw, pitch, roll alone, and all six at once."""
-    zero = np.zeros((3, 6))
-    yaw, pitch, roll = zero.copy(), zero.copy(), zero.copy()
-    yaw[:, 4] = (0.0, m, 0.4 * m)
-    pitch[:, 3] = (0.0, -m, -0.3 * m)
-    roll[:, 5] = (0.0, m, 0.5 * m)
-    mixed = np.array([
-        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [0.6, -0.3, 0.4, 0.5 * m, m, -0.5 * m],
-        [0.3, 0.4, -0.2, -0.7 * m, 0.2 * m, 0.8 * m],
-    ])
-    return {"yaw": yaw, "pitch": pitch, "roll": roll, "mixed": mixed}
-
-
 # measured errors of the first-order rotation model: yaw 0.084, pitch 0.093, roll 0.186 (of which
 # about 0.1 is the dropped rotation of the aperture point, large at R = 24), mixed 0.155; ignoring
 # the rotation: 1.0, 1.0, 1.0, 0.72.
@@ -140,7 +126,7 @@ ROTATION_TOLERANCES = {"yaw": 0.12, "pitch": 0.13, "roll": 0.26, "mixed": 0.22}
 @pytest.mark.parametrize("name", list(ROTATION_TOLERANCES))
 def test_rotation_matches_ray_tracer(scene, sharp_rotation, name):
     """Rotation paths, (n, 6): the first-order model is close, and clearly closer than translation alone."""
-    cp = _rotation_paths(MAGNITUDE)[name]
+    cp = motion_paths(MAGNITUDE)[name]
     truth = render_blur(scene, ROTATION_SHAPE, cp, N_TIMES)
     error = _operator_error(sharp_rotation, truth, cp)
     assert error < ROTATION_TOLERANCES[name], f"{name}: {error:.3f}"

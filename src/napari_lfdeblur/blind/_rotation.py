@@ -150,8 +150,8 @@ class _Stage:
 class _Fit:
     """Adam on the 6-DOF control points against a fixed latent, in the zero-mean gauge.
 
-    The rotation is optimised as ``R r`` (px of image motion at the frame's
-    edge scale), so that one learning rate suits translation (views) and
+    The rotation is optimised as ``R r`` (px of image motion at a view's
+    centre), so that one learning rate suits translation (views) and
     rotation alike.
     """
 
