@@ -220,3 +220,14 @@ def test_embedded_cluster_workers_start_with_the_mmap_threshold_and_no_profiler(
         profiled = c.run(profiling)
     assert list(found.values()) == [str(WORKER_MMAP_THRESHOLD)]
     assert list(profiled.values()) == [False]
+
+
+def test_shake6_items_are_6dof_and_blurred_by_their_path():
+    from napari_lfdeblur.batch._items import draw_path
+
+    cp = draw_path("shake6", (1.0, 2.0), np.random.default_rng(0))
+    assert cp.shape == (5, 6) and 0 < np.abs(cp[:, 3:]).max() <= 0.005
+    lf = np.random.default_rng(1).random((3, 3, 16, 16)).astype(np.float32)
+    blurred, cp = simulate_item(lf, "a", 0, path_kind="shake6", extent=1.5, seed=4, n_times=8)
+    assert cp.shape[1] == 6
+    np.testing.assert_array_equal(blurred, simulate_blur(lf, cp, n_times=8, device="cpu"))

@@ -89,7 +89,7 @@ def simulate_dataset(inputs, out_dir, *, n_per_input: int = 1, path_kind: str = 
     out_dir : str or Path
         The output folder (created when missing).
     n_per_input : int, default 1
-    path_kind : {'linear', 'arc', 'shake', 'random'}, default 'random'
+    path_kind : {'linear', 'arc', 'shake', 'shake6', 'random'}, default 'random'
         See :func:`draw_path`.
     extent : float or (float, float), default 2.0
         Motion size in views, or a range it is drawn from uniformly.

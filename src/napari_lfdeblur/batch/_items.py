@@ -20,7 +20,7 @@ import numpy as np
 
 __all__ = ["PATH_KINDS", "item_seed", "draw_path", "simulate_item", "run_item", "item_metadata"]
 
-PATH_KINDS = ("linear", "arc", "shake", "random")
+PATH_KINDS = ("linear", "arc", "shake", "shake6", "random")
 
 
 def item_seed(seed: int, name: str, index: int) -> int:
@@ -70,18 +70,20 @@ def draw_path(path_kind: str, extent, rng: np.random.Generator) -> np.ndarray:
 
     Parameters
     ----------
-    path_kind : {'linear', 'arc', 'shake', 'random'}
+    path_kind : {'linear', 'arc', 'shake', 'shake6', 'random'}
         ``linear``: a straight motion at a uniform angle; ``arc``: a bowed one
         (bend uniform in [-0.5, 0.5]); ``shake`` and ``random``: random
         control points (5 and 4) in a box, as :func:`~napari_lfdeblur.path.shake_path`
-        and :func:`~napari_lfdeblur.path.random_path`.
+        and :func:`~napari_lfdeblur.path.random_path`; ``shake6``: ``shake``
+        with a handheld camera rotation (up to 0.005 rad), as
+        :func:`~napari_lfdeblur.path.shake6_path`.
     extent : float or (float, float)
         The motion's size in views, or a range to draw it from uniformly.
     rng : numpy.random.Generator
 
     Returns
     -------
-    ndarray, float64, shape (n, 3)
+    ndarray, float64, shape (n, 3), or (n, 6) for ``shake6``
     """
     from .. import path as paths
 
@@ -94,6 +96,8 @@ def draw_path(path_kind: str, extent, rng: np.random.Generator) -> np.ndarray:
         return paths.arc_path(length=length, bend=float(rng.uniform(-0.5, 0.5)), angle_deg=angle)
     if path_kind == "shake":
         return paths.shake_path(extent=length, seed=int(rng.integers(2**31)))
+    if path_kind == "shake6":
+        return paths.shake6_path(extent=length, seed=int(rng.integers(2**31)))
     if path_kind == "random":
         return paths.random_path(extent=length, seed=int(rng.integers(2**31)))
     raise ValueError(f"unknown path kind {path_kind!r}: choose one of {', '.join(PATH_KINDS)}")
@@ -120,7 +124,7 @@ def simulate_item(lf, name: str, index: int, *, path_kind: str = "random", exten
     Returns
     -------
     blurred : ndarray, float32, same shape as ``lf``
-    control_points : ndarray, float64, shape (n, 3)
+    control_points : ndarray, float64, shape (n, 3), or (n, 6) for ``path_kind='shake6'``
     """
     from ..blur import simulate_blur
 
