@@ -26,7 +26,28 @@ import torch
 
 from ._taps import fold, rows_per_block
 
-__all__ = ["pair_splat", "tap_kernel_4d", "Taps4D"]
+__all__ = ["axis_taps", "pair_splat", "tap_kernel_4d", "Taps4D"]
+
+
+def axis_taps(shift: torch.Tensor, size: int):
+    """Integer offset ``o`` and fraction ``f`` of shifts along an axis of ``size`` samples.
+
+    The sample ``a + shift`` is ``(1 - f) l[a + o] + f l[a + o + 1]`` (indices
+    clamped to the axis). Shifts beyond ``+-(size - 1)`` read only the edge
+    sample, so they are clamped there first, which bounds the number of
+    offsets; ``f`` stays differentiable in ``shift``.
+
+    Returns
+    -------
+    o : torch.Tensor, int64, ``shift``'s shape
+    f : torch.Tensor, ``shift``'s dtype and shape
+    """
+    if size == 1:
+        return torch.zeros_like(shift, dtype=torch.long), torch.zeros_like(shift)
+    lim = size - 1.0
+    s = shift.clamp(-lim, lim)
+    o = torch.floor(s.detach()).clamp_(-lim, lim - 1).long()
+    return o, s - o.to(s.dtype)
 
 
 def pair_splat(shift: torch.Tensor, d_inf: float, n_views: int, n_pixels: int):
@@ -48,18 +69,7 @@ def pair_splat(shift: torch.Tensor, d_inf: float, n_views: int, n_pixels: int):
     pairs : torch.Tensor, int64, shape (P, 2)
         The ``(angular, spatial)`` offsets of the pairs.
     """
-    offs, fracs = [], []
-    for scale, size in ((1.0, n_views), (d_inf, n_pixels)):
-        if size == 1:
-            offs.append(torch.zeros_like(shift, dtype=torch.long))
-            fracs.append(torch.zeros_like(shift))
-            continue
-        lim = size - 1.0
-        s = (scale * shift).clamp(-lim, lim)
-        o = torch.floor(s.detach()).clamp_(-lim, lim - 1).long()
-        offs.append(o)
-        fracs.append(s - o.to(s.dtype))
-    (oa, ob), (fa, fb) = offs, fracs
+    (oa, fa), (ob, fb) = axis_taps(shift, n_views), axis_taps(d_inf * shift, n_pixels)
     corners = [(0, 0, (1 - fa) * (1 - fb)), (1, 0, fa * (1 - fb)), (0, 1, (1 - fa) * fb), (1, 1, fa * fb)]
     a = torch.stack([oa + i for i, _, _ in corners], dim=-1)  # (T, n, 4)
     b = torch.stack([ob + j for _, j, _ in corners], dim=-1)

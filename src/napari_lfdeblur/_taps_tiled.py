@@ -25,6 +25,7 @@ import math
 import torch
 
 from ._taps import fold
+from ._taps4d import axis_taps
 
 __all__ = ["rotation_displacement", "tiled_kernel", "TiledTaps", "tile_side"]
 
@@ -66,27 +67,13 @@ def tile_side(shape, block_elements: int) -> int:
     return int(min(64, max(16, side)))
 
 
-def _axis_taps(shift: torch.Tensor, size: int):
-    """Integer offset ``o`` and fraction ``f`` of shifts along an axis of ``size`` samples.
-
-    Shifts beyond ``+-(size - 1)`` read only the edge sample, so they are
-    clamped there first, which bounds the number of offsets.
-    """
-    if size == 1:
-        return torch.zeros_like(shift, dtype=torch.long), torch.zeros_like(shift)
-    lim = size - 1.0
-    s = shift.clamp(-lim, lim)
-    o = torch.floor(s.detach()).clamp_(-lim, lim - 1).long()
-    return o, s - o.to(s.dtype)
-
-
 def _tile_kernel(shifts, sizes, n_times):
     """The kernel of one tile from its per-instant shifts along (v, y, u, x).
 
     ``shifts`` are broadcastable to ``(T, h, w)``. Returns ``K (S, h, w)``
     and the ``(S, 4)`` integer offsets of its taps.
     """
-    taps = [_axis_taps(s, n) for s, n in zip(shifts, sizes)]
+    taps = [axis_taps(s, n) for s, n in zip(shifts, sizes)]
     full = torch.broadcast_shapes(*(o.shape for o, _ in taps))
     offs = [o.expand(full) for o, _ in taps]
     fracs = [f.expand(full) for _, f in taps]

@@ -143,6 +143,16 @@ def _interp_matrices(shift: torch.Tensor, size: int) -> torch.Tensor:
     return (1.0 - w)[..., None] * m0 + w[..., None] * m1
 
 
+def _frame_coordinates(positions: torch.Tensor, shape, frame):
+    """``x~`` (X,), ``y~`` (Y,) of a light field's columns and rows, in its frame, and ``R`` (px)."""
+    Y, X = shape[2], shape[3]
+    y0, x0, Yf, Xf = (0, 0, Y, X) if frame is None else frame
+    r = max(Xf, Yf) / 2.0
+    xt = normalized_coordinates(Xf, r, positions.dtype, positions.device)[x0 : x0 + X]
+    yt = normalized_coordinates(Yf, r, positions.dtype, positions.device)[y0 : y0 + Y]
+    return xt, yt, r
+
+
 def angular_shifts(positions: torch.Tensor, shape, frame=None):
     """``s_u(x, t_k) = p_x - x~ p_z`` and ``s_v(y, t_k) = p_y - y~ p_z`` (docs/model.md).
 
@@ -162,11 +172,7 @@ def angular_shifts(positions: torch.Tensor, shape, frame=None):
     s_u : torch.Tensor, shape (T, X)
     s_v : torch.Tensor, shape (T, Y)
     """
-    Y, X = shape[2], shape[3]
-    y0, x0, Yf, Xf = (0, 0, Y, X) if frame is None else frame
-    r = max(Xf, Yf) / 2.0
-    xt = normalized_coordinates(Xf, r, positions.dtype, positions.device)[x0 : x0 + X]
-    yt = normalized_coordinates(Yf, r, positions.dtype, positions.device)[y0 : y0 + Y]
+    xt, yt, _ = _frame_coordinates(positions, shape, frame)
     return (
         positions[:, 0:1] - xt[None, :] * positions[:, 2:3],
         positions[:, 1:2] - yt[None, :] * positions[:, 2:3],
@@ -190,11 +196,7 @@ def image_shifts(positions: torch.Tensor, shape, frame=None):
     t_y, t_x : torch.Tensor, shape (T, Y, X)
         Displacements in px, before the ``d_inf`` share of the angular shifts.
     """
-    Y, X = shape[2], shape[3]
-    y0, x0, Yf, Xf = (0, 0, Y, X) if frame is None else frame
-    r = max(Xf, Yf) / 2.0
-    xt = normalized_coordinates(Xf, r, positions.dtype, positions.device)[x0 : x0 + X]
-    yt = normalized_coordinates(Yf, r, positions.dtype, positions.device)[y0 : y0 + Y]
+    xt, yt, r = _frame_coordinates(positions, shape, frame)
     return rotation_displacement(positions[:, 3:6], xt, yt, r)
 
 
@@ -310,12 +312,14 @@ class BlurOperator:
         # a 6-column path without rotation is the 3-DOF one, unless its rotation needs a gradient
         if cp.shape[1] == 6 and (cp.requires_grad or has_rotation(cp)):
             self.kind = "tiled"
+        self._tiles = None  # the TiledTaps of a path with rotation (its tiles' index vectors cost to build)
         if self.kind == "angular":
             self._kernel = tap_kernel(self.s_u, self.s_v, U, V)
         elif self.kind == "4d":
             self._kernel = tap_kernel_4d(self.s_u, self.s_v, self.infinity_disparity, self.shape)
         else:
             self._kernel = self._tiled_kernel()
+            self._tiles = TiledTaps(self.shape, *self._kernel)
 
     def _tiled_kernel(self):
         t_y, t_x = image_shifts(self.positions, self.shape, self.frame)
@@ -323,8 +327,7 @@ class BlurOperator:
         if d != 0.0:
             t_y = t_y + d * self.s_v[:, :, None]
             t_x = t_x + d * self.s_u[:, None, :]
-        K, layout = tiled_kernel(self.s_v, self.s_u, t_y, t_x, self.shape, tile_side(self.shape, self.block_elements))
-        return K, layout
+        return tiled_kernel(self.s_v, self.s_u, t_y, t_x, self.shape, tile_side(self.shape, self.block_elements))
 
     def _check(self, t: torch.Tensor) -> torch.Tensor:
         if not isinstance(t, torch.Tensor):
@@ -353,8 +356,6 @@ class BlurOperator:
         if self.kind == "4d":
             K, offsets = self._kernel
             return Taps4D(self.shape, K, offsets, self.block_elements)
-        if getattr(self, "_tiles", None) is None:
-            self._tiles = TiledTaps(self.shape, *self._kernel)
         return self._tiles
 
     @property
