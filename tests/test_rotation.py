@@ -192,3 +192,36 @@ def test_rotation_equivalent_blurs_a_plane_like_the_translation():
     centre = (2, 2, slice(24, 40), slice(24, 40))
     # measured: 0.0007 mean difference against a blur of 0.021
     assert np.abs(by_translation - by_rotation)[centre].mean() < 0.1 * np.abs(by_translation - lf)[centre].mean()
+
+
+def test_blur_reach_counts_the_rotations_image_motion():
+    from napari_lfdeblur.blind._evidence import blur_reach
+
+    # a scene at zero disparity: a translation would not move it, so the reach is the rotation's alone
+    g = torch.as_tensor(np.broadcast_to(_lf((1, 1, 24, 40), seed=5), (5, 5, 24, 40)).copy())[..., None]
+    r = 0.04
+    yaw = np.zeros((2, 6))
+    yaw[1, 4] = r
+    R = 20.0
+    x = (np.arange(40) - 19.5) / R
+    y = (np.arange(24) - 11.5) / R
+    # the yaw's span over the exposure at each pixel: R r (1 + x~^2) along x, R r x~ y~ along y
+    span = R * r * np.hypot(1 + x[None, :] ** 2, x[None, :] * y[:, None])
+    assert blur_reach(yaw, 32, g) == pytest.approx(span.max(), rel=1e-5)
+
+
+def test_path_helpers_with_rotation():
+    from napari_lfdeblur.path import canonical_time_direction, path_in_frame
+
+    with pytest.raises(ValueError, match="rotation"):
+        path_in_frame(CP6, (0, 0, 16, 16), (32, 32))
+    no_rot = np.concatenate([CP6[:, :3], np.zeros((3, 3))], axis=1)
+    np.testing.assert_array_equal(path_in_frame(no_rot, (0, 0, 16, 16), (32, 32))[:, 3:], 0.0)
+    # a rotation-only path is put in its time direction by its rotation
+    roll = np.zeros((2, 6))
+    roll[:, 5] = [0.05, -0.05]
+    np.testing.assert_array_equal(canonical_time_direction(roll), roll[::-1])
+    # a translation decides over a rotation
+    both = roll.copy()
+    both[:, 0] = [-1.0, 1.0]
+    np.testing.assert_array_equal(canonical_time_direction(both), both)
