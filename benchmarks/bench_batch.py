@@ -2,13 +2,13 @@
 
 Usage::
 
-    python benchmarks/bench_batch.py [--items 1000] [--scaling-items 32] [--overhead-items 64] [--out PATH]
+    python benchmarks/bench_batch.py [--items 1000] [--scaling-items 64] [--overhead-items 64] [--out PATH]
 
 Three measurements, all of ``simulate_dataset`` (random paths, T = 32, noise 0.01) on
 single-threaded worker processes, timed from the submission of the items to the last
 manifest line (the cluster is started beforehand):
 
-1. scaling: the same items (9x9x128x128x3) on 1 and on 2 workers;
+1. scaling: the same items (9x9x128x128x3) on 1 and on 2 workers, in alternating rounds;
 2. overhead: the items (9x9x128x128x3) on 1 worker against a plain loop in this process
    (one torch thread) that reads, simulates and writes the same files, in alternating rounds;
 3. many items: ``--items`` items of 9x9x64x64x3 on 2 workers, with the peak memory of this
@@ -114,23 +114,23 @@ def plain_loop(inputs, out: Path, n_per_input: int) -> float:
 def run(args, work: Path) -> list[str]:
     small = make_inputs(work / "small", 4, (9, 9, 64, 64, 3))
     large = make_inputs(work / "large", 2, (9, 9, 128, 128, 3))
-    rows = []
-    per = max(1, args.scaling_items // len(large))
-    times = {}
+    per = max(1, args.scaling_items // (ROUNDS * len(large)))
     per_large = max(1, args.overhead_items // (ROUNDS * len(large)))
+    times = {1: 0.0, 2: 0.0}
     t_dask = t_loop = 0.0
-    for n in (1, 2):
-        with connect(workers=n, device="cpu") as client:
-            client.run(_warm)
-            times[n] = timed_batch(client, large, work / f"scale{n}", per)
-            if n == 1:  # alternate dask and loop rounds, so that drift of the machine hits both alike
-                plain_loop(large[:1], work / "warm_loop", 1)
-                for _ in range(ROUNDS):
-                    t_dask += timed_batch(client, large, work / "over_dask", per_large)
-                    t_loop += plain_loop(large, work / "over_loop", per_large)
-        print(f"{n} worker(s): {times[n]:.2f} s", file=sys.stderr)
-    n_s, n_o = per * len(large), ROUNDS * per_large * len(large)
-    rows += [
+    # both clusters run side by side; 1 worker, 2 workers, dask and the plain loop alternate by round,
+    # so that drift of the machine hits every measurement alike
+    with connect(workers=1, device="cpu") as one, connect(workers=2, device="cpu") as two:
+        one.run(_warm), two.run(_warm)
+        plain_loop(large[:1], work / "warm_loop", 1)
+        for _ in range(ROUNDS):
+            for n, client in ((1, one), (2, two)):
+                times[n] += timed_batch(client, large, work / f"scale{n}", per)
+            t_dask += timed_batch(one, large, work / "over_dask", per_large)
+            t_loop += plain_loop(large, work / "over_loop", per_large)
+    print(f"1 worker: {times[1]:.2f} s, 2 workers: {times[2]:.2f} s", file=sys.stderr)
+    n_s, n_o = ROUNDS * per * len(large), ROUNDS * per_large * len(large)
+    rows = [
         "| measurement | items | result |", "|---|---|---|",
         f"| 1 worker, 9x9x128x128x3 | {n_s} | {times[1]:.2f} s ({n_s / times[1]:.2f} items/s) |",
         f"| 2 workers, 9x9x128x128x3 | {n_s} | {times[2]:.2f} s ({n_s / times[2]:.2f} items/s): "
@@ -155,7 +155,7 @@ def run(args, work: Path) -> list[str]:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--items", type=int, default=1000, help="items of the many-items run (default 1000)")
-    parser.add_argument("--scaling-items", type=int, default=32, help="items of the 1 vs 2 workers runs")
+    parser.add_argument("--scaling-items", type=int, default=64, help="items of the 1 vs 2 workers runs")
     parser.add_argument("--overhead-items", type=int, default=64, help="items of the overhead runs")
     parser.add_argument("--workdir", type=Path, help="scratch folder (default: a temporary one, removed)")
     _report.add_out_argument(parser, __file__)
@@ -168,9 +168,10 @@ def main(argv=None):
     path = _report.table_path(args.out, __file__)
     body = [
         "`simulate_dataset` (random paths, T = 32, noise 0.01) on single-threaded worker processes of a local "
-        "dask cluster, timed from submission to the last manifest line, the cluster already started. The "
-        "plain loop reads, simulates and writes the same items in one process with one torch thread; the two "
-        f"run in {ROUNDS} alternating rounds. "
+        "dask cluster, timed from submission to the last manifest line, the cluster already started (a 1-worker "
+        "and a 2-worker cluster side by side). The plain loop reads, simulates and writes the same items in one "
+        "process with one torch thread. The 1-worker, 2-worker, dask and plain-loop runs alternate in "
+        f"{ROUNDS} rounds, each round writing a fresh output folder. "
         f"Load average of the machine before and after the run: up to {load:.1f} on {os.cpu_count()} cores.",
         "",
         *rows,

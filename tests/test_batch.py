@@ -197,7 +197,7 @@ def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
     assert main(argv) == 0 and "1 already done" in capsys.readouterr().out
 
 
-def test_embedded_cluster_workers_start_with_the_mmap_threshold_and_no_profiler():
+def test_embedded_cluster_workers_start_with_malloc_thresholds_no_profiler_and_slow_timers(monkeypatch):
     # glibc reads MALLOC_MMAP_THRESHOLD_ once, at process start: it must be in the worker's environment
     # from the spawn on, not set afterwards by the nanny
     from napari_lfdeblur.batch import connect
@@ -206,20 +206,26 @@ def test_embedded_cluster_workers_start_with_the_mmap_threshold_and_no_profiler(
     def environ_at_start():
         with open(f"/proc/{os.getpid()}/environ", "rb") as f:
             start = dict(kv.split(b"=", 1) for kv in f.read().split(b"\0") if b"=" in kv)
-        return start.get(b"MALLOC_MMAP_THRESHOLD_", b"").decode()
+        return tuple(start.get(k, b"").decode() for k in (b"MALLOC_MMAP_THRESHOLD_", b"MALLOC_TRIM_THRESHOLD_"))
 
     if not Path("/proc/self/environ").exists():
         pytest.skip("needs /proc (Linux)")
+    # dask lets this process's environment override its settings, and a nanny puts its own values
+    # there when it spawns a worker: clear what the module's other cluster left
+    for name in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"):
+        monkeypatch.delenv(name, raising=False)
     def profiling():
         import dask
 
-        return dask.config.get("distributed.worker.profile.enabled")
+        return (dask.config.get("distributed.worker.profile.enabled"),
+                dask.config.get("distributed.admin.tick.interval"))
 
     with connect(workers=1, device="cpu") as c:
         found = c.run(environ_at_start)
         profiled = c.run(profiling)
-    assert list(found.values()) == [str(WORKER_MMAP_THRESHOLD)]
-    assert list(profiled.values()) == [False]
+    # the trim threshold replaces the nanny's 64 KiB: glibc's dynamic rule, twice the mmap threshold
+    assert list(found.values()) == [(str(WORKER_MMAP_THRESHOLD), str(2 * WORKER_MMAP_THRESHOLD))]
+    assert list(profiled.values()) == [(False, "500ms")]  # the timers' settings reach the worker process
 
 
 def test_shake6_items_are_6dof_and_blurred_by_their_path():

@@ -6,6 +6,7 @@ printed, and a line per failed item), 2 on bad usage.
 
 from __future__ import annotations
 
+import logging
 import shlex
 import sys
 from pathlib import Path
@@ -89,6 +90,31 @@ def _bar(total: int):
     return tqdm(total=total, unit="item", file=sys.stderr, dynamic_ncols=True)
 
 
+class _OneLine(logging.Filter):
+    """Fold a log record's traceback into one line: ``message ExcType: text``."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.exc_info and record.exc_info[1] is not None:
+            exc = record.exc_info[1]
+            record.msg = f"{record.getMessage()} {type(exc).__name__}: {exc}".strip()
+            record.args, record.exc_info, record.exc_text = None, None, None
+        return True
+
+
+def _dask_logs_without_tracebacks() -> None:
+    """dask logs the exceptions it meets (a lost scheduler, a killed worker) with tracebacks: fold them."""
+    handlers = logging.getLogger("distributed").handlers
+    for h in handlers:
+        if not any(isinstance(f, _OneLine) for f in h.filters):
+            h.addFilter(_OneLine())
+
+
+def _dashboard(client) -> str:
+    if "dashboard" in client.scheduler_info().get("services", {}):
+        return client.dashboard_link
+    return "none (the scheduler runs without one)"
+
+
 def run_batch(args) -> int:
     """Run ``lfdeblur batch ...``; returns the exit status (0, or 1 when items failed)."""
     from .cli import CLIError
@@ -113,8 +139,11 @@ def _run(args) -> int:
                        noise=args.noise, n_times=args.n_times)
     else:
         total, run, options = n_inputs, deblur_many, dict(params=_params(args))
+    import distributed  # noqa: F401  (its logging set-up, before the handlers are given the filter)
+
+    _dask_logs_without_tracebacks()
     with connect(args.scheduler, workers=args.workers, device=args.device) as client:
-        print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr, flush=True)
+        print(f"dask dashboard: {_dashboard(client)}", file=sys.stderr, flush=True)
         bar = _bar(total)
 
         def show(rec):
@@ -131,7 +160,7 @@ def _run(args) -> int:
     done = f"{report.n_ok} done, {report.n_skipped} already done (skipped)"
     if report.n_failed:
         print(f"lfdeblur batch {args.batch_command}: {report.n_failed} of {total} items failed ({done}); "
-              f"see {Path(args.out_dir) / 'manifest.jsonl'}", file=sys.stderr)
+              f"see {Path(args.out_dir) / 'manifest.jsonl'}; rerun the same command to redo them", file=sys.stderr)
         return 1
     print(f"all {total} items in {args.out_dir} ({done})")
     return 0

@@ -18,12 +18,33 @@ __all__ = ["BatchReport", "connect", "expand_inputs", "gpu_workers", "run_batch"
 _INSTALL = 'the batch API needs dask.distributed: pip install "napari-lfdeblur[batch]"'
 
 #: glibc's mmap threshold for the worker processes of the embedded cluster, in bytes. dask's nanny
-#: sets ``MALLOC_TRIM_THRESHOLD_`` before it spawns a worker, and any explicit malloc setting freezes
-#: glibc's dynamic mmap threshold at 128 KiB: every array over that size is then a fresh ``mmap``
-#: whose pages fault in on first touch, on every item. 32 MiB is the ceiling that glibc's dynamic
-#: threshold reaches in a plain process, so light fields up to that size reuse freed memory there too.
+#: sets ``MALLOC_TRIM_THRESHOLD_`` to 64 KiB before it spawns a worker, and any explicit malloc
+#: setting freezes glibc's dynamic mmap threshold at 128 KiB: every array over that size is then a
+#: fresh ``mmap`` whose pages fault in on first touch, on every item. 32 MiB is the ceiling that
+#: glibc's dynamic threshold reaches in a plain process, so light fields up to that size reuse freed
+#: memory there too.
 WORKER_MMAP_THRESHOLD = 32 * 2**20
-_MMAP_KEY = "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_"
+#: glibc's trim threshold for the same workers: twice the mmap threshold, as glibc's dynamic rule
+#: sets it. dask's 64 KiB returns the top of the heap to the system after every item, and the next
+#: item faults its pages in again.
+WORKER_TRIM_THRESHOLD = 2 * WORKER_MMAP_THRESHOLD
+_ENV_KEY = "distributed.nanny.pre-spawn-environ."
+_WORKER_SETUP = "napari_lfdeblur.batch._worker_setup"  # a dask preload module
+
+#: dask settings of the embedded cluster. Its client, scheduler and nannies share the machine with
+#: the workers, so their timers take CPU from the items: the statistical profiler wakes every 10 ms
+#: and takes the GIL from the task; the event-loop latency probe (``tick``, 20 ms), the nannies'
+#: memory monitor (100 ms) and the system monitor (500 ms) cost together about 0.1 s of CPU per
+#: second of an idle 2-worker cluster. They are slowed here to about a fifth of that; the
+#: memory limit is still enforced, at 0.5 s.
+EMBEDDED_CLUSTER_CONFIG = {
+    _ENV_KEY + "MALLOC_MMAP_THRESHOLD_": str(WORKER_MMAP_THRESHOLD),
+    _ENV_KEY + "MALLOC_TRIM_THRESHOLD_": str(WORKER_TRIM_THRESHOLD),
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "500ms",
+    "distributed.worker.memory.monitor-interval": "500ms",
+    "distributed.admin.system-monitor.interval": "2s",
+}
 
 
 @dataclass
@@ -83,10 +104,14 @@ def connect(client=None, *, workers: int | None = None, device: str = "auto"):
         ``workers`` of them (default: one per core; with ``device='cuda'``, one
         with the resource ``GPU=1``); a string is a scheduler address
         (``tcp://host:8786``); a client is used as it is. The embedded
-        cluster's workers start with glibc's mmap threshold at
-        :data:`WORKER_MMAP_THRESHOLD` and without dask's statistical profiler
-        (docs/batch.md says why; start a cluster of your own for the
-        dashboard's profile).
+        cluster's workers start with glibc's mmap and trim thresholds at
+        :data:`WORKER_MMAP_THRESHOLD` and :data:`WORKER_TRIM_THRESHOLD`, and the cluster with dask's timers
+        slowed (:data:`EMBEDDED_CLUSTER_CONFIG`: no statistical profiler;
+        docs/batch.md says why; start a cluster of your own for the
+        dashboard's profile). As in dask, ``MALLOC_MMAP_THRESHOLD_`` and
+        ``MALLOC_TRIM_THRESHOLD_`` already in this process's environment
+        take precedence; a local cluster started earlier in the process
+        leaves dask's own values there.
     workers : int, optional
         Worker processes of the embedded cluster.
     device : {'auto', 'cpu', 'cuda'}
@@ -115,11 +140,11 @@ def connect(client=None, *, workers: int | None = None, device: str = "auto"):
     n = workers or (1 if gpu else os.cpu_count() or 1)
     import dask
 
-    # the workers' statistical profiler wakes every 10 ms and takes the GIL from the task: off here
-    with dask.config.set({_MMAP_KEY: str(WORKER_MMAP_THRESHOLD), "distributed.worker.profile.enabled": False}):
+    with dask.config.set(EMBEDDED_CLUSTER_CONFIG):
         cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                            resources={"GPU": 1} if gpu else None, dashboard_address=":0",
-                                           env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+                                           env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
+                                           preload=[_WORKER_SETUP])
     with cluster, distributed.Client(cluster) as c:
         yield c
 
@@ -238,14 +263,14 @@ def run_batch(specs: list, out_dir: Path, *, client, workers, device, card: dict
         write_card(out_dir, **card)
         _sweep_temporaries(out_dir, [s for _, s in todo])
         if todo:
-            with connect(client, workers=workers, device=device) as c:
-                use_gpu = _use_gpu(c, device)
-                for _, spec in todo:
-                    spec["device"] = "cuda" if use_gpu else "cpu"
-                try:
+            try:
+                with connect(client, workers=workers, device=device) as c:
+                    use_gpu = _use_gpu(c, device)
+                    for _, spec in todo:
+                        spec["device"] = "cuda" if use_gpu else "cpu"
                     _collect(c, todo, {"GPU": 1} if use_gpu else None, manifest, callback, records)
-                finally:
-                    _sweep_temporaries(out_dir, [s for _, s in todo])
+            finally:  # after an embedded cluster has closed, its workers write nothing more
+                _sweep_temporaries(out_dir, [s for _, s in todo])
         report = BatchReport(out_dir=out_dir, records=records)
         write_card(out_dir, **card, counts={"ok": report.n_ok, "skipped": report.n_skipped,
                                             "failed": report.n_failed})
