@@ -149,6 +149,33 @@ def test_previews_are_the_estimate_of_their_iteration():
         with_previews(iter_deconvolve(blurred, cp, n_times=4), 1.5)
 
 
+def test_previews_are_spaced_by_their_cost():
+    from napari_lfdeblur.progress import Progress
+
+    now = [0.0]  # a clock: each record takes 0.1 s, each preview 1 s
+
+    def estimate():
+        now[0] += 1.0
+        return np.zeros(1)
+
+    def solver(n):
+        for i in range(n):
+            now[0] += 0.1
+            yield Progress("tv", i + 1, n, loss=0.0, estimate=estimate)
+        return "done"
+
+    records = []
+    result = run_to_completion(with_previews(solver(60), 2, share=3.0, clock=lambda: now[0]), records.append)
+    shown = [i for i, r in enumerate(records) if r.preview is not None]
+    # a preview at the 2nd record; the next no sooner than 3 x 1 s later (30 records), and 2 records on
+    assert result == "done" and shown == [1, 31]
+    records = []
+    run_to_completion(with_previews(solver(8), 2, clock=lambda: now[0]), records.append)  # share 0: by count
+    assert [i for i, r in enumerate(records) if r.preview is not None] == [1, 3, 5, 7]
+    with pytest.raises(ValueError, match="share"):
+        with_previews(solver(1), 1, share=-1.0)
+
+
 def test_generator_returns_result_and_close_stops_it():
     lf = np.random.default_rng(5).random((3, 3, 8, 8)).astype(np.float32)
     cp = linear_path(1.0, z=1.0)

@@ -638,3 +638,31 @@ def test_blind_motion_choice_reaches_the_params_and_6dof_results_display(make_na
     w.form.motion.value = "6dof"
     assert w.run() is None
     assert notifications[-1][0] == "error" and "6-DOF motion needs the alternating method" in notifications[-1][1]
+
+
+def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch, lf, notifications):
+    import napari_lfdeblur.blind as blind_core
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+    from napari_lfdeblur.progress import Progress
+
+    seen = []
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+        seen.append(params)
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params)
+
+    monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
+    viewer = make_napari_viewer()
+    layer, _ = _blind_layer(viewer, lf)
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    assert w.form.restore_anyway.value is False  # the presets require evidence of blur
+    w.run_and_wait(timeout=60)
+    w.form.restore_anyway.value = True
+    w.run_and_wait(timeout=60)
+    assert [p.require_evidence for p in seen] == [True, False]
+    assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["require_evidence"] is False
+    w.form.preset.value = "paper"  # choosing a preset shows its own setting again
+    assert w.form.restore_anyway.value is False
+    assert not [n for n in notifications if n[0] == "error"], notifications

@@ -15,6 +15,8 @@ so many records (in the thread that runs the solver).
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -85,7 +87,7 @@ def run_to_completion(gen, callback=None):
             callback(record)
 
 
-def with_previews(gen, every: int):
+def with_previews(gen, every: int, *, share: float = 0.0, clock=time.perf_counter):
     """Wrap a solver generator so that every ``every``-th record carries a preview.
 
     Counting only the records that carry an ``estimate``, the wrapper calls
@@ -95,17 +97,28 @@ def with_previews(gen, every: int):
     records pass through unchanged. It returns the wrapped generator's
     result, and closing it closes ``gen``.
 
+    With ``share > 0`` the previews are also spaced by their own cost: after
+    a preview that took ``c`` seconds, the next one comes no sooner than
+    ``share * c`` seconds later (the count goes on meanwhile), so previews
+    take at most about ``1 / (1 + share)`` of the run, whatever the light
+    field's size.
+
     Parameters
     ----------
     gen : generator of Progress
         A solver generator such as ``iter_deconvolve(...)``.
     every : int
         Records between previews (>= 0; 0: never).
+    share : float, default 0.0
+        Least time between previews, in units of the last preview's cost
+        (>= 0; 0: by count only).
+    clock : callable, default time.perf_counter
+        Seconds, for the spacing (a parameter for tests).
 
     Raises
     ------
     ValueError
-        If ``every`` is negative.
+        If ``every`` or ``share`` is negative.
     TypeError
         If ``every`` is not an integer.
     """
@@ -113,11 +126,14 @@ def with_previews(gen, every: int):
         raise TypeError(f"every must be an integer; got {type(every).__name__}")
     if every < 0:
         raise ValueError(f"every must be >= 0; got {every}")
-    return _with_previews(gen, int(every))
+    if not share >= 0:
+        raise ValueError(f"share must be >= 0; got {share}")
+    return _with_previews(gen, int(every), float(share), clock)
 
 
-def _with_previews(gen, every):
+def _with_previews(gen, every, share, clock):
     count = 0
+    not_before = -math.inf
     try:
         while True:
             try:
@@ -126,8 +142,12 @@ def _with_previews(gen, every):
                 return stop.value
             if every and record.estimate is not None and record.preview is None:
                 count += 1
-                if count % every == 0:
+                if count >= every and clock() >= not_before:
+                    start = clock()
                     record.preview = record.estimate()
+                    end = clock()
+                    not_before = end + share * (end - start)
+                    count = 0
             yield record
     finally:
         gen.close()

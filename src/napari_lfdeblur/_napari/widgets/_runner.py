@@ -5,7 +5,8 @@ parameter form (``self.form``, whose first field is the input layer), Run /
 Cancel buttons and a :class:`ProgressPanel`. *Run* reads the form, builds
 the core's generator and runs it in a napari ``thread_worker``, wrapped in
 :func:`napari_lfdeblur.progress.with_previews` at the widget's preview
-cadence (so previews are computed in the worker thread). Each progress
+cadence, spaced by their cost (:data:`PREVIEW_SHARE`; previews are computed
+in the worker thread). Each progress
 record updates the progress bar (stage, iteration, loss, time left); the
 returned result becomes layers; an exception raised by the core becomes an
 error notification. *Cancel* quits the worker: the generator is closed at
@@ -28,7 +29,11 @@ from ._controls import LayerChoice, is_image, notify_error, notify_info, notify_
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ProgressPanel", "SolverWidget", "format_seconds"]
+#: a light-field preview that took ``c`` seconds to compute is followed by at least ``PREVIEW_SHARE * c``
+#: seconds without one: previews then cost the run at most about 5 %, however large the light field
+PREVIEW_SHARE = 20.0
+
+__all__ = ["PREVIEW_SHARE", "ProgressPanel", "SolverWidget", "format_seconds"]
 
 
 def format_seconds(seconds: float) -> str:
@@ -104,7 +109,7 @@ def _guarded(make_generator, preview_every: int):
     """Run ``make_generator()``'s generator with previews every ``preview_every`` records;
     turn an exception into a returned :class:`_Failure`."""
     try:
-        result = yield from with_previews(make_generator(), preview_every)
+        result = yield from with_previews(make_generator(), preview_every, share=PREVIEW_SHARE)
     except Exception as exc:  # noqa: BLE001 - reported to the user, with the traceback logged
         return _Failure(exc)
     return result

@@ -6,7 +6,8 @@ napari ``thread_worker``. Its magicgui form (``form``) holds the input
 fields below), ``motion`` (3-DOF translation, or 6-DOF with a camera
 rotation: an ``(n, 6)`` path, plotted in a second panel),
 ``n_control_points``, ``n_iter`` (path iterations),
-``tv_iter`` (final TV iterations), ``device``, ``seed``,
+``tv_iter`` (final TV iterations), ``restore_anyway`` (restore even when
+the evidence test finds little blur), ``device``, ``seed``,
 ``infinity_disparity``, ``edge_anisotropy``, ``preview_every`` and an
 optional ``true_path`` layer. While it runs:
 
@@ -26,8 +27,9 @@ layers and adds nothing. When it finishes, the previews are replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
 timings, package version, and the verdict of the evidence test in
 ``blur_evidence``) and ``'<source> estimated path'``. When the data show
-little blur, the result is the input with a zero path, and a notification
-says why (:attr:`napari_lfdeblur.blind.BlindResult.info`).
+little blur, the result is the input with a zero path (unless *restore
+anyway* is ticked), and a notification says why
+(:attr:`napari_lfdeblur.blind.BlindResult.info`).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from magicgui.widgets import ComboBox, Label
+from magicgui.widgets import CheckBox, ComboBox, Label
 
 from ...path import validate_control_points
 from ..layers import (
@@ -66,8 +68,9 @@ def _iteration_field(params) -> tuple[str, str]:
 
 
 def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: int, edge_anisotropy: float,
-                 motion: str = "3dof"):
-    """``BlindParams`` of a preset with the form's values (``tv_iter`` 0: no final solve).
+                 motion: str = "3dof", restore_anyway: bool = False):
+    """``BlindParams`` of a preset with the form's values (``tv_iter`` 0: no final solve;
+    ``restore_anyway``: ``require_evidence=False``).
 
     Raises
     ------
@@ -84,7 +87,8 @@ def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: in
     stage, field = _iteration_field(params)
     return params.replace(
         n_control_points=n_control_points, final=None if tv_iter == 0 else {"n_iter": tv_iter},
-        latent={"edge_anisotropy": edge_anisotropy}, motion=motion, **{stage: {field: n_iter}},
+        latent={"edge_anisotropy": edge_anisotropy}, motion=motion, require_evidence=not restore_anyway,
+        **{stage: {field: n_iter}},
     )
 
 
@@ -96,7 +100,7 @@ def _preset_values(preset: str) -> dict:
     stage, field = _iteration_field(p)
     return {"n_control_points": p.n_control_points, "n_iter": getattr(getattr(p, stage), field),
             "tv_iter": 0 if p.final is None else p.final.n_iter, "edge_anisotropy": p.latent.edge_anisotropy,
-            "motion": p.motion}
+            "motion": p.motion, "restore_anyway": not p.require_evidence}
 
 
 def _fields(viewer) -> list:
@@ -117,6 +121,9 @@ def _fields(viewer) -> list:
              "per pyramid level ('default' preset) or joint Adam steps ('paper' preset)"),
         spin("tv_iter", 100, 0, 100000, label="final TV iterations", tooltip="iterations of the final "
              "non-blind TV solve (0: return the blurred input with the path)"),
+        CheckBox(name="restore_anyway", value=False, label="restore anyway",
+                 tooltip="restore with the estimated path even when the data give little evidence of blur "
+                 "(BlindParams.require_evidence=False; default: return the input unchanged then)"),
         device_choice(),
         spin("seed", 0, 0, 2**31 - 1, tooltip="random seed of the initial path"),
         fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
@@ -208,7 +215,7 @@ class BlindDeblurWidget(SolverWidget):
         f = self.form
         params = _make_params(f.preset.value, n_control_points=f.n_control_points.value, n_iter=f.n_iter.value,
                               tv_iter=f.tv_iter.value, edge_anisotropy=f.edge_anisotropy.value,
-                              motion=f.motion.value)
+                              motion=f.motion.value, restore_anyway=f.restore_anyway.value)
         settings = {"preset": f.preset.value, "device": f.device.value, "seed": f.seed.value,
                     "infinity_disparity": f.infinity_disparity.value}
         gen = iter_blind_deblur(lf, infinity_disparity=settings["infinity_disparity"], params=params,
