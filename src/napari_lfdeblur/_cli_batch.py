@@ -103,6 +103,10 @@ class _OneLine(logging.Filter):
 
 def _dask_logs_without_tracebacks() -> None:
     """dask logs the exceptions it meets (a lost scheduler, a killed worker) with tracebacks: fold them."""
+    try:
+        import distributed  # noqa: F401  (its logging set-up gives the handlers to filter)
+    except ImportError:  # connect() says how to install it
+        return
     handlers = logging.getLogger("distributed").handlers
     for h in handlers:
         if not any(isinstance(f, _OneLine) for f in h.filters):
@@ -139,8 +143,6 @@ def _run(args) -> int:
                        noise=args.noise, n_times=args.n_times)
     else:
         total, run, options = n_inputs, deblur_many, dict(params=_params(args))
-    import distributed  # noqa: F401  (its logging set-up, before the handlers are given the filter)
-
     _dask_logs_without_tracebacks()
     with connect(args.scheduler, workers=args.workers, device=args.device) as client:
         print(f"dask dashboard: {_dashboard(client)}", file=sys.stderr, flush=True)
