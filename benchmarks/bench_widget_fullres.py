@@ -17,7 +17,9 @@ scene; ``illum``: the whole Lytro Illum capture), blurred by its known path with
 3. reports the previews (how many, Qt-thread time per preview), the peak resident memory above the
    level before the run (in units of the light field's size), whether the result layer holds the
    solver's array itself (no copy), and the run's time against the same solver iterated by a script
-   (``--rounds`` of each, alternating; the other figures are the worst round's);
+   (``--rounds`` of each, alternating; the other figures are the worst round's). All torch work of
+   this script runs on the plugin's torch thread, as in a napari session: the script's run too, so
+   that the process keeps one OpenMP thread pool, as a script of its own would;
 4. presses Cancel after each of ``--waits`` seconds and reports how long the run took to stop and
    which layers were left.
 
@@ -184,8 +186,10 @@ def main(argv=None):
 
     from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget, _make_params
 
-    with tempfile.TemporaryDirectory() as tmp:
-        path = blurred_file(args.scene, Path(tmp))
+    from napari_lfdeblur._napari._torch_thread import call
+
+    with tempfile.TemporaryDirectory() as tmp:  # torch work stays off the GUI thread, as in napari
+        path = call(blurred_file, args.scene, Path(tmp))
         viewer = napari.Viewer(show=False)
         t0 = time.perf_counter()
         [layer] = viewer.open(path, plugin="napari-lfdeblur")
@@ -206,7 +210,7 @@ def main(argv=None):
         print(f"widget: {runs[-1]}", file=sys.stderr, flush=True)
         for name in [ly.name for ly in viewer.layers if ly is not layer]:
             viewer.layers.remove(name)
-        script_s.append(script_run(lf, params, args.device))
+        script_s.append(call(script_run, lf, params, args.device))  # one thread, as a script's
         print(f"script: {script_s[-1]:.1f} s", file=sys.stderr, flush=True)
     run = {key: max(r[key] for r in runs) for key in runs[0]}  # the worst of the rounds
     run["seconds"], script_s = sum(r["seconds"] for r in runs), sum(script_s)

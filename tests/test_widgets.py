@@ -666,3 +666,38 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     w.form.preset.value = "paper"  # choosing a preset shows its own setting again
     assert w.form.restore_anyway.value is False
     assert not [n for n in notifications if n[0] == "error"], notifications
+
+
+def test_solver_steps_and_samples_run_on_one_torch_thread(make_napari_viewer, monkeypatch, lf, notifications):
+    # libgomp keeps a thread pool per thread that uses torch: the plugin keeps all its torch work on one thread
+    import threading
+
+    import napari_lfdeblur.blind as blind_core
+    from napari_lfdeblur._napari import sample_data
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+    from napari_lfdeblur.progress import Progress
+
+    seen = []
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+        for i in range(3):
+            seen.append(threading.current_thread())
+            yield Progress("path", i, 3, loss=1.0, estimate=lambda: seen.append(threading.current_thread()) or lf)
+        return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params)
+
+    monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
+    real_blur = sample_data.simulate_blur
+    monkeypatch.setattr(sample_data, "simulate_blur",
+                        lambda *a, **k: seen.append(threading.current_thread()) or real_blur(*a, **k))
+    viewer = make_napari_viewer()
+    layer, _ = _blind_layer(viewer, lf)
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    w.form.preview_every.value = 1
+    for _ in range(2):
+        assert w.run_and_wait(timeout=60)
+    [(data, _, _)] = sample_data.synthetic_blurred_sample()
+    assert len(seen) == 2 * (3 + 3) + 1  # 3 steps and 3 previews per run, and the sample's blur
+    assert len(set(seen)) == 1 and seen[0] is not threading.main_thread()
+    assert data.shape[:4] == sample_data.SYNTHETIC_SHAPE
+    assert not [n for n in notifications if n[0] == "error"], notifications

@@ -8,6 +8,7 @@ from .. import __version__
 from ..blur import simulate_blur
 from ..path import arc_path
 from ..samples import LYTRO_ATTRIBUTION, lytro_sample, synthetic_scene
+from ._torch_thread import call
 
 #: size of the synthetic sample
 SYNTHETIC_SHAPE = (9, 9, 128, 128)
@@ -33,7 +34,8 @@ def synthetic_scene_sample():
 
 def synthetic_blurred_sample():
     lf, disparity = synthetic_scene(SYNTHETIC_SHAPE, n_layers=3, color=True, seed=0)
-    blurred = simulate_blur(lf, BLURRED_SAMPLE_PATH, n_times=BLURRED_SAMPLE_N_TIMES)
+    # on the plugin's torch thread, not napari's GUI thread (see _torch_thread)
+    blurred = call(simulate_blur, lf, BLURRED_SAMPLE_PATH, n_times=BLURRED_SAMPLE_N_TIMES)
     return _layer(
         blurred,
         "synthetic scene (blurred)",

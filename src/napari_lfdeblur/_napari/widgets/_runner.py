@@ -24,6 +24,7 @@ from magicgui.widgets import Container, Label, ProgressBar, PushButton
 from napari.qt.threading import thread_worker
 
 from ...progress import with_previews
+from .._torch_thread import iterate
 from ..layers import LayerError, lightfield_from_layer
 from ._controls import LayerChoice, is_image, notify_error, notify_info, notify_warning
 
@@ -106,10 +107,10 @@ class _Failure:
 
 
 def _guarded(make_generator, preview_every: int):
-    """Run ``make_generator()``'s generator with previews every ``preview_every`` records;
-    turn an exception into a returned :class:`_Failure`."""
+    """Run ``make_generator()``'s generator with previews every ``preview_every`` records, on the
+    plugin's torch thread (``_torch_thread``); turn an exception into a returned :class:`_Failure`."""
     try:
-        result = yield from with_previews(make_generator(), preview_every, share=PREVIEW_SHARE)
+        result = yield from iterate(with_previews(make_generator(), preview_every, share=PREVIEW_SHARE))
     except Exception as exc:  # noqa: BLE001 - reported to the user, with the traceback logged
         return _Failure(exc)
     return result
