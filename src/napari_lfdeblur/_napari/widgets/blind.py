@@ -58,8 +58,9 @@ __all__ = ["BlindDeblurWidget", "REDRAW_INTERVAL", "REDRAW_SHARE"]
 
 #: least seconds between two redraws of the plots and the path preview during a run
 REDRAW_INTERVAL = 0.3
-#: a redraw that took ``c`` seconds is followed by at least ``REDRAW_SHARE * c`` seconds without one
-REDRAW_SHARE = 5.0
+#: a redraw that took ``c`` seconds is followed by at least ``REDRAW_SHARE * c`` seconds without one, so that
+#: the redraws (in Qt's thread, holding Python's lock) take at most about 5 % of a run
+REDRAW_SHARE = 20.0
 
 
 def _iteration_field(params) -> tuple[str, str]:
