@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -40,6 +39,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _report  # noqa: E402  (benchmarks/_report.py)
 import bench_fullres  # noqa: E402
+from blind_eval import PeakMemory  # noqa: E402
 
 NOISE = 0.005
 TICK_MS = 20
@@ -65,28 +65,6 @@ class TickGaps:
 
     def gaps_ms(self) -> np.ndarray:
         return np.diff(self.times) * 1000 if len(self.times) > 1 else np.zeros(1)
-
-
-class PeakRSS:
-    """Peak resident memory above the level on entry, sampled every 10 ms in a thread."""
-
-    def __enter__(self):
-        import psutil
-
-        self._proc = psutil.Process()
-        self.base = self.peak = self._proc.memory_info().rss
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-        return self
-
-    def _run(self):
-        while not self._stop.wait(0.01):
-            self.peak = max(self.peak, self._proc.memory_info().rss)
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join()
 
 
 def blurred_file(scene: str, folder: Path) -> Path:
@@ -123,7 +101,7 @@ def wait_while_running(widget, seconds: float | None = None) -> None:
 
 def full_run(widget, layer, nbytes: int) -> dict:
     calls = timed_on_progress(widget)
-    with PeakRSS() as mem, TickGaps() as ticks:
+    with PeakMemory("cpu") as mem, TickGaps() as ticks:
         t0 = time.perf_counter()
         if widget.run() is None:
             raise SystemExit("the run did not start (see the notification above)")
@@ -135,7 +113,7 @@ def full_run(widget, layer, nbytes: int) -> dict:
     return {"seconds": seconds, "records": len(calls), "previews": len(preview_s),
             "preview_ms": 1000 * float(np.median(preview_s)) if preview_s else float("nan"),
             "gap_max_ms": float(gaps.max()), "gap_p99_ms": float(np.percentile(gaps, 99)),
-            "memory_x": (mem.peak - mem.base) / nbytes,
+            "memory_x": mem.delta_mib * 2**20 / nbytes,
             "no_copy": bool(np.shares_memory(out.data, widget.last_result.lightfield))}
 
 
