@@ -75,7 +75,7 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
     for cp in starts:
         tried.append((yield from run.alternation(cp, g.clone())))
     cp, latent, loss = min(tried, key=lambda t: t[2])
-    history = [min(t[2] for t in tried)]
+    history = [loss]
     for _ in range(p.rotation.n_outer - 1):
         cp, latent, loss = yield from run.alternation(cp, latent)
         history.append(loss)
@@ -119,7 +119,7 @@ class _Stage:
         self.sigma = edge_sigmas(p.latent)
         self.stage, self.n_stages = stage, stage + 2  # then the evidence and the final stage
         rp = p.rotation
-        per_outer = n_hqs_steps(self.lam, p.latent) * (p.latent.n_cg + 1) + rp.steps // 10 + 1
+        per_outer = n_hqs_steps(self.lam, p.latent) * (p.latent.n_cg + 1) + math.ceil(rp.steps / 10)
         self.n_records = (rp.n_outer + 1) * per_outer
         self.tick = 0
 
