@@ -113,12 +113,6 @@ def _dask_logs_without_tracebacks() -> None:
             h.addFilter(_OneLine())
 
 
-def _dashboard(client) -> str:
-    if "dashboard" in client.scheduler_info().get("services", {}):
-        return client.dashboard_link
-    return "none (the scheduler runs without one)"
-
-
 def run_batch(args) -> int:
     """Run ``lfdeblur batch ...``; returns the exit status (0, or 1 when items failed)."""
     from .cli import CLIError
@@ -145,7 +139,7 @@ def _run(args) -> int:
         total, run, options = n_inputs, deblur_many, dict(params=_params(args))
     _dask_logs_without_tracebacks()
     with connect(args.scheduler, workers=args.workers, device=args.device) as client:
-        print(f"dask dashboard: {_dashboard(client)}", file=sys.stderr, flush=True)
+        print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr, flush=True)
         bar = _bar(total)
 
         def show(rec):
