@@ -24,7 +24,6 @@ import os
 import shutil
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -36,32 +35,9 @@ from napari_lfdeblur.path import save_path_json
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _report  # noqa: E402  (benchmarks/_report.py)
+from blind_eval import PeakMemory  # noqa: E402
 
 OPTIONS = dict(path_kind="random", extent=2.0, noise=0.01, seed=0)
-
-
-class PeakRSS:
-    """Peak resident memory of this process above its level on entry, sampled every 10 ms."""
-
-    def __init__(self):
-        import psutil
-
-        self.proc = psutil.Process()
-        self._stop = threading.Event()
-
-    def __enter__(self):
-        self.base = self.peak = self.proc.memory_info().rss
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-        return self
-
-    def _run(self):
-        while not self._stop.wait(0.01):
-            self.peak = max(self.peak, self.proc.memory_info().rss)
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join()
 
 
 def make_inputs(folder: Path, n: int, shape) -> list[Path]:
@@ -143,11 +119,11 @@ def run(args, work: Path) -> list[str]:
     per_many = max(1, args.items // len(small))
     with connect(workers=2, device="cpu") as client:
         client.run(_warm)
-        with PeakRSS() as mem:
+        with PeakMemory("cpu") as mem:
             t_many = timed_batch(client, small, work / "many", per_many)
     n_m = per_many * len(small)
     rows.append(f"| 2 workers, 9x9x64x64x3 | {n_m} | {t_many:.1f} s ({n_m / t_many:.2f} items/s); client and "
-                f"scheduler process: peak +{(mem.peak - mem.base) / 2**20:.0f} MiB over "
+                f"scheduler process: peak +{mem.delta_mib:.0f} MiB over "
                 f"{mem.base / 2**20:.0f} MiB (one item is {9 * 9 * 64 * 64 * 3 * 4 / 2**20:.1f} MiB) |")
     return rows
 

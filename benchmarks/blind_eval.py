@@ -160,6 +160,11 @@ class PeakMemory:
         return False
 
     @property
+    def base(self) -> int:
+        """The level on entry, bytes."""
+        return self._base
+
+    @property
     def delta_mib(self) -> float:
         return (self.peak - self._base) / 2**20
 
