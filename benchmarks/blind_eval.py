@@ -279,7 +279,7 @@ def input_row(case: Case, quick: bool) -> dict:
         "blur_mismatch": err.blur_mismatch,
         "chamfer": err.chamfer,
         "rmse_relative": err.rmse_relative,
-        "reference_sigma": estimate_noise_sigma(case.sharp),  # finest-scale detail of the ground truth (noise, in a real capture)
+        "reference_sigma": estimate_noise_sigma(case.sharp),  # the ground truth's finest detail
     }
 
 
