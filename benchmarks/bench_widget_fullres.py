@@ -119,14 +119,10 @@ def full_run(widget, layer, nbytes: int) -> dict:
 
 def script_run(lf, params, device: str) -> float:
     from napari_lfdeblur.blind import iter_blind_deblur
+    from napari_lfdeblur.progress import run_to_completion
 
     t0 = time.perf_counter()
-    gen = iter_blind_deblur(lf, infinity_disparity=0.0, params=params, device=device, seed=0)
-    try:
-        while True:
-            next(gen)
-    except StopIteration:
-        pass
+    run_to_completion(iter_blind_deblur(lf, infinity_disparity=0.0, params=params, device=device, seed=0))
     return time.perf_counter() - t0
 
 
@@ -162,9 +158,8 @@ def main(argv=None):
 
     import napari
 
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget, _make_params
-
     from napari_lfdeblur._napari._torch_thread import call
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget, _make_params
 
     with tempfile.TemporaryDirectory() as tmp:  # torch work stays off the GUI thread, as in napari
         path = call(blurred_file, args.scene, Path(tmp))
