@@ -11,8 +11,8 @@ of each of the three paths against each latent, on one fixed set of pixels.
 It prints the fits relative to the true path's under the same latent
 (negative: better than the true path; the fit is ``k^T G k - 2 b^T k``, a
 constant left out), then each path's fit under its own latent relative to the
-true path's under its own, with the estimate's blur mismatch and its gain when
-restored whatever the evidence.
+true path's under its own, with the estimate's blur mismatch, its gain when
+restored whatever the evidence, and the in-plane extents of both paths.
 
 A fit that prefers, under every latent, the path that made that latent shows
 that the alternation has many fixed points; comparing the three diagonal
@@ -50,7 +50,7 @@ def main(argv=None):
     from napari_lfdeblur.blind._path_fit import GramLoss
     from napari_lfdeblur.blur import BlurOperator
     from napari_lfdeblur.metrics import path_error, psnr
-    from napari_lfdeblur.path import center_path
+    from napari_lfdeblur.path import bezier_positions, center_path
     from napari_lfdeblur.progress import run_to_completion
 
     p = BlindParams.preset("default")
@@ -69,11 +69,12 @@ def main(argv=None):
         gain = psnr(res.lightfield, case.sharp, crop=ev.CROP) - psnr(case.blurred, case.sharp, crop=ev.CROP)
         g = gray(torch.as_tensor(case.blurred))
         g = shear(g, d) if d else g  # the path stage's d_inf = 0 frame
-        V, U = g.shape[:2]
-        box = max(0.5, 0.35 * (min(V, U) - 1))
+        box = res.info["box"]  # the solver's box for the path, views
         fit = GramLoss(g, p.path.n_pixels, np.random.default_rng(0), p.n_times, box, box * p.path.z_box,
                        p.path.tiles, weight=disparity_weights(g, p.path.disparity_weight))
         paths = (center_path(case.control_points, p.n_times), np.asarray(res.control_points), np.zeros((2, 3)))
+        extents = [np.ptp(bezier_positions(c, p.n_times)[:, :2], axis=0) for c in paths[:2]]
+        print(f"{name} | in-plane extent (x, y), views: true {extents[0].round(2)}, estimate {extents[1].round(2)}")
         own = []  # each path's fit under its own latent
         for under, cp in zip(names, paths):
             op = EdgeBlurred(BlurOperator(tuple(g.shape), cp, n_times=p.n_times, infinity_disparity=0.0), sigma)
