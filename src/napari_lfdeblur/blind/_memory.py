@@ -20,7 +20,8 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     Counts the light-field-sized float32 tensors alive at once in the final
     (colour) TV stage and in the grayscale path stage (on its window of
     ``params.path.region`` px), plus the blur operator's blocks and
-    interpolation tables.
+    interpolation tables. Code loaded on the first run in a process (torch's
+    optimiser modules, some tens of MB) is not counted: it is not the data's.
 
     Parameters
     ----------
@@ -48,7 +49,7 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     path = n * C * 4 + n * 4 * 2 + V * U * ny * nx * 4 * 16
     tables = 4 * max(p.n_times, p.final_n_times) * (X * U * U + Y * V * V) * 2
     blocks = 4 * (1 << 22) * 3
-    return int(max(final, path) + tables + blocks + 64 * 2**20)
+    return int(max(final, path) + tables + blocks)
 
 
 def plan_tiles(shape, params: BlindParams | None, free: int | None):
