@@ -58,6 +58,12 @@ def test_divergence_is_exact_negative_adjoint(shape, weights):
     buf = torch.full(shape, 7.0, dtype=torch.float64)
     assert divergence4d(G, weights, out=buf) is buf
     torch.testing.assert_close(buf, divergence4d(G, weights), rtol=0, atol=0)
+    # scaled and added onto what the tensor held
+    base = torch.from_numpy(rng.standard_normal(shape))
+    acc = divergence4d(G, weights, out=base.clone(), scale=-0.3, accumulate=True)
+    torch.testing.assert_close(acc, base - 0.3 * divergence4d(G, weights))
+    with pytest.raises(ValueError, match="needs out"):
+        divergence4d(G, weights, accumulate=True)
 
 
 def test_divergence_matches_autograd_vjp():

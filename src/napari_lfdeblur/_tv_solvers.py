@@ -1,8 +1,9 @@
 """Solvers of ``min_l 1/2 ||K l - f||^2 + w TV4(l)`` (+ a box) for :mod:`napari_lfdeblur.deconvolution`.
 
 :func:`iter_fista_tv` is FISTA (Beck & Teboulle) on the data term with the
-proximal map of ``w TV4 + box`` computed by a few warm-started iterations of
-the fast gradient projection on its dual, and adaptive momentum restart
+proximal map of ``w TV4 + box`` computed by a few warm-started
+iterations of the gradient projection on its dual (Beck & Teboulle's GP,
+Chambolle's iteration with the box inside), and adaptive momentum restart
 (O'Donoghue & Candes). :func:`estimate_noise_sigma` is the robust noise
 estimate behind the default weight.
 """
@@ -56,12 +57,15 @@ def tv_value(x, isotropic, axis_weights, buffers=None) -> float:
 
 
 class TVProx:
-    """``prox(v, mu) = argmin_x 1/2 ||x - v||^2 + mu TV4(x)`` over the box, by dual FGP.
+    """``prox(v, mu) = argmin_x 1/2 ||x - v||^2 + mu TV4(x)`` over the box, by gradient projection on its dual.
 
-    The dual field (one component per axis, in the unit ball) is kept between
-    calls, so each call starts from the previous solution: with the slowly
-    moving ``v`` of an outer iteration a few inner iterations suffice. All
-    work happens in buffers allocated once; ``out`` receives the result.
+    Each iteration takes a gradient step on the dual field (one component per
+    axis, the primal clipped to the box) and projects it onto the unit ball,
+    with step ``1 / (mu L)`` for ``L`` the bound on ``||gradient4d||^2``. The dual field is kept
+    between calls, so each call starts from the previous solution: with the
+    slowly moving ``v`` of an outer iteration a few inner iterations suffice
+    (FISTA's outer momentum carries the acceleration). All work happens in
+    buffers allocated once; ``out`` receives the result.
     """
 
     def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box):
@@ -71,34 +75,23 @@ class TVProx:
         self.box = box
         self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
         self.p = [torch.zeros_like(like) for _ in range(4)]
-        self.r = [torch.empty_like(like) for _ in range(4)]
         self.x = torch.empty_like(like)
         self.norm = torch.empty_like(like) if isotropic else None
 
     def _primal(self, v, mu, q, out):
-        x = divergence4d(q, self.aw, out=out).mul_(mu).add_(v)
+        """``v + mu div(q)``, clipped to the box, into ``out``."""
+        x = divergence4d(q, self.aw, out=out.copy_(v), scale=mu, accumulate=True)
         return x if self.box is None else x.clamp_(*self.box)
 
     def __call__(self, v: torch.Tensor, mu: float, out: torch.Tensor) -> torch.Tensor:
         if mu <= 0:
             out.copy_(v)
             return out if self.box is None else out.clamp_(*self.box)
-        p, r = self.p, self.r
-        for a in range(4):
-            r[a].copy_(p[a])
-        t = 1.0
         step = 1.0 / (mu * self.lip)
         for _ in range(self.n_inner):
-            add_gradient_(r, self._primal(v, mu, r, self.x), step, self.aw)  # r <- p_new (in place)
-            project_tv_dual(r, 1.0, self.isotropic, self.norm)
-            t_new = (1.0 + math.sqrt(1.0 + 4.0 * t * t)) / 2.0
-            beta = (t - 1.0) / t_new
-            for a in range(4):  # p <- p_new + beta (p_new - p); swap so that r holds the extrapolation
-                p[a].sub_(r[a]).mul_(-beta).add_(r[a])
-            p, r = r, p
-            t = t_new
-        self.p, self.r = p, r
-        return self._primal(v, mu, p, out)
+            add_gradient_(self.p, self._primal(v, mu, self.p, self.x), step, self.aw)
+            project_tv_dual(self.p, 1.0, self.isotropic, self.norm)
+        return self._primal(v, mu, self.p, out)
 
 
 def _dist2(a, b, buf) -> float:

@@ -10,7 +10,7 @@
 
   solved by FISTA [1]_ on the data term: each iteration takes one gradient
   step (one blur forward and one adjoint) and the proximal map of
-  ``weight * TV4`` plus the box, computed by a few iterations of the fast
+  ``weight * TV4`` plus the box, computed by a few iterations of the
   gradient projection on its dual [2]_, warm-started from the previous
   iteration's dual field. The step ``1 / L`` uses an estimate of
   ``L = ||K||^2`` that is raised whenever a step shows more curvature

@@ -88,7 +88,7 @@ def _forward_differences(L: torch.Tensor, axes, w) -> tuple[torch.Tensor, ...]:
 
 
 def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None = None,
-                 out: torch.Tensor | None = None) -> torch.Tensor:
+                 out: torch.Tensor | None = None, *, scale: float = 1.0, accumulate: bool = False) -> torch.Tensor:
     """Discrete divergence: the exact negative adjoint of :func:`gradient4d`.
 
     Parameters
@@ -100,6 +100,11 @@ def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None
     out : torch.Tensor, optional
         Written in place and returned, instead of a new tensor (the
         components' shape, dtype and device).
+    scale : float, default 1.0
+        The result is ``scale * div``.
+    accumulate : bool, default False
+        Add the result to ``out``'s contents instead of overwriting them
+        (``out`` is then required): one pass fewer than adding afterwards.
 
     Returns
     -------
@@ -108,13 +113,16 @@ def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None
     """
     if len(G) != 4:
         raise ValueError(f"divergence4d takes 4 components (v, u, y, x); got {len(G)}")
-    return _divergence(G, range(4), _weights(axis_weights), out)
+    if accumulate and out is None:
+        raise ValueError("divergence4d: accumulate=True needs out")
+    w = tuple(scale * a for a in _weights(axis_weights))
+    return _divergence(G, range(4), w, out, accumulate)
 
 
-def _divergence(G: Sequence[torch.Tensor], axes, w, out=None) -> torch.Tensor:
+def _divergence(G: Sequence[torch.Tensor], axes, w, out=None, accumulate=False) -> torch.Tensor:
     """The negative adjoint of :func:`_forward_differences` along ``axes``, one component each (into ``out``)."""
     shape = G[0].shape
-    div = torch.zeros_like(G[0]) if out is None else out.zero_()
+    div = torch.zeros_like(G[0]) if out is None else (out if accumulate else out.zero_())
     for axis, g in zip(axes, G):
         _check(g)
         if g.shape != shape:
@@ -257,7 +265,7 @@ def project_tv_dual(P: Sequence[torch.Tensor], radius: float, isotropic: bool = 
     norm = torch.mul(P[0], P[0], out=work) if work is not None else P[0] * P[0]
     for p in P[1:]:
         norm.addcmul_(p, p)
-    scale = norm.sqrt_().div_(radius).clamp_(min=1.0)
+    scale = (norm.sqrt_() if radius == 1.0 else norm.sqrt_().div_(radius)).clamp_(min=1.0)
     for p in P:
         p.div_(scale)
     return tuple(P)
