@@ -853,3 +853,29 @@ def test_anisotropic_edge_gaussian_has_the_widths_asked_and_is_self_adjoint():
     x, y = torch.rand(shape, dtype=torch.float64), torch.rand(shape, dtype=torch.float64)
     lhs = float((_latent.gauss_yx(x, (0.4, 1.1)) * y).sum())
     assert lhs == pytest.approx(float((x * _latent.gauss_yx(y, (0.4, 1.1))).sum()), rel=1e-12)
+
+
+# ------------------------------------------------------------ optimiser
+
+
+def test_adam_takes_the_steps_of_torch_optim_adam():
+    from napari_lfdeblur.blind._adam import Adam
+
+    rng = np.random.default_rng(5)
+    target = torch.from_numpy(rng.standard_normal((4, 3)))
+    start_a, start_b = torch.from_numpy(rng.standard_normal((4, 3))), torch.from_numpy(rng.standard_normal(7))
+
+    def run(make):
+        a, b = start_a.clone().requires_grad_(True), start_b.clone().requires_grad_(True)
+        opt = make([{"params": [a], "lr": 0.05}, {"params": [b]}])
+        for _ in range(25):
+            opt.zero_grad(set_to_none=True)
+            (((a - target) ** 4).sum() + (b**2).sum()).backward()
+            opt.step()
+        return a.detach(), b.detach()
+
+    mine = run(lambda groups: Adam(groups, lr=0.2))
+    theirs = run(lambda groups: torch.optim.Adam(groups, lr=0.2))
+    for m, t in zip(mine, theirs):
+        torch.testing.assert_close(m, t, rtol=0, atol=0)  # the same arithmetic, step by step
+    assert not torch.equal(mine[0], start_a)  # it moved

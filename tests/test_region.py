@@ -102,7 +102,6 @@ import os
 import threading
 
 import numpy as np
-import torch
 from napari_lfdeblur.blind import BlindParams, blind_deblur, estimate_blind_memory
 from napari_lfdeblur.blur import simulate_blur
 
@@ -131,9 +130,6 @@ blurred = simulate_blur(lf, [[-0.6, 0.2, -0.3], [0.5, -0.3, 0.3]], n_times=8)
 del lf
 p = BlindParams().replace(n_control_points=2, final_n_times=8, require_evidence=False, final={"n_iter": 3, "tol": 0.0},
                           path=dict(n_outer=1, steps=20, n_random=20, n_random_later=5, z_outer=1, region=32))
-# the solver's Adam loads torch._dynamo (tens of MB of code) on its first step: load it before the count starts
-weight = torch.zeros(1, requires_grad=True)
-torch.optim.Adam([weight]).step()
 exact = reset_high_water_mark()
 base = rss()
 peak, stop = [base], threading.Event()

@@ -13,6 +13,7 @@ import torch
 from ..blur import BlurOperator
 from ..priors import sparse_gradient_prior
 from ..progress import Progress
+from ._adam import Adam
 from ._params import BlindParams, PathEstimate
 from ._path_fit import PathParam
 
@@ -40,7 +41,7 @@ def iter_joint(g: torch.Tensor, d_inf: float, p: BlindParams, device, rng, box: 
     pp = PathParam(cp0, p.n_times, box, device)
     pp.project()
     L = g.clone().requires_grad_(True)
-    opt = torch.optim.Adam([{"params": [pp.q], "lr": jp.lr}, {"params": [L], "lr": jp.lf_lr}])
+    opt = Adam([{"params": [pp.q], "lr": jp.lr}, {"params": [L], "lr": jp.lf_lr}])
     w0 = jp.prior_weight
     history = []
     for it in range(1, jp.n_iter + 1):

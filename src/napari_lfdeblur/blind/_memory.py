@@ -20,8 +20,7 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     Counts the light-field-sized float32 tensors alive at once in the final
     (colour) TV stage and in the grayscale path stage (on its window of
     ``params.path.region`` px), plus the blur operator's blocks and
-    interpolation tables. Code loaded on the first run in a process (torch's
-    optimiser modules, some tens of MB) is not counted: it is not the data's.
+    interpolation tables.
 
     Parameters
     ----------

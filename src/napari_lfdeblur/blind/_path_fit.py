@@ -16,6 +16,7 @@ import torch
 
 from ..path import bernstein_matrix
 from ..priors import gradient_yx
+from ._adam import Adam
 from ._latent import gauss_yx
 
 __all__ = ["PathParam", "GramLoss", "fit_path", "FIT_REPORT_EVERY", "FIT_RTOL", "FIT_PATIENCE"]
@@ -232,7 +233,7 @@ def fit_path(pp: PathParam, loss_fn, steps: int, lr: float, every: int = FIT_REP
     It stops early when the best fit of the batch has improved by less than
     :data:`FIT_RTOL` (relative) in :data:`FIT_PATIENCE` steps.
     """
-    opt = torch.optim.Adam([pp.q], lr=lr)
+    opt = Adam([pp.q], lr=lr)
     best = float("inf")
     stall = 0
     for step in range(1, steps + 1):

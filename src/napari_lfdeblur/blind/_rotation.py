@@ -27,6 +27,7 @@ from ..blur import BlurOperator
 from ..path import MAX_ROTATION, bernstein_matrix, bezier_positions, path_in_frame
 from ..priors import gradient_yx
 from ..progress import Progress
+from ._adam import Adam
 from ._alternating import relay
 from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
 from ._latent import EdgeBlurred, edge_sigmas, l0_latent, n_hqs_steps
@@ -163,7 +164,7 @@ class _Fit:
         mean_row = bernstein_matrix(len(cp), rp.n_times).mean(axis=0)
         self.mean_row = torch.as_tensor(mean_row, dtype=torch.float32, device=device)
         self.q = (torch.as_tensor(cp, dtype=torch.float32, device=device) / self.scale).requires_grad_(True)
-        self.opt = torch.optim.Adam([self.q], lr=rp.lr)
+        self.opt = Adam([self.q], lr=rp.lr)
 
     def control_points(self) -> np.ndarray:
         return (self.q.detach() * self.scale).cpu().double().numpy()
