@@ -869,7 +869,7 @@ def test_adam_takes_the_steps_of_torch_optim_adam():
         a, b = start_a.clone().requires_grad_(True), start_b.clone().requires_grad_(True)
         opt = make([{"params": [a], "lr": 0.05}, {"params": [b]}])
         for _ in range(25):
-            opt.zero_grad(set_to_none=True)
+            opt.zero_grad()
             (((a - target) ** 4).sum() + (b**2).sum()).backward()
             opt.step()
         return a.detach(), b.detach()

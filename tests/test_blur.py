@@ -34,6 +34,23 @@ def test_small_blocks_give_the_same_result():
     torch.testing.assert_close(big.adjoint(y), tiny.adjoint(y))
 
 
+def test_taps_left_out_where_they_weigh_nothing_change_nothing():
+    # a large p_z moves the (v, y) and (u, x) offsets across the image: in blocks of one row, many of the 4D
+    # kernel's taps weigh nothing, or only in some columns, and are left out there
+    rng = np.random.default_rng(4)
+    lf = rng.random((4, 5, 12, 14, 1))
+    cp = np.array([[-0.3, 0.2, -2.5], [0.4, -0.1, 2.5]])
+    op = BlurOperator(lf.shape, cp, n_times=6, infinity_disparity=1.5, device="cpu", dtype=torch.float64,
+                      block_elements=1)
+    taps = op._taps()
+    n_taps, X = len(taps.taps), lf.shape[3]
+    assert any(len(spans) < n_taps or any(b - a < X for _, a, b in spans) for spans in taps.spans)
+    x = torch.from_numpy(lf)
+    np.testing.assert_allclose(op.forward(x).numpy(), blur_reference(lf, cp, 6, 1.5), atol=1e-12)
+    y = torch.from_numpy(rng.random(lf.shape))
+    assert abs(float((op.forward(x) * y).sum() - (x * op.adjoint(y)).sum())) < 1e-10
+
+
 def test_zero_path_is_identity():
     lf = np.random.default_rng(0).random((5, 5, 8, 9, 3)).astype(np.float32)
     for d_inf in (0.0, 1.5):

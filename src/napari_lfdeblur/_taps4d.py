@@ -128,7 +128,7 @@ class Taps4D:
         dev = K.device
         off = offsets.tolist()
         self.lo = [min(min(o[i] for o in off), 0) for i in range(4)]  # (v, y, u, x)
-        hi = [max(max(o[i] for o in off), 0) for i in range(4)]
+        self.hi = hi = [max(max(o[i] for o in off), 0) for i in range(4)]
         self.iv = torch.arange(self.lo[0], V + hi[0], device=dev).clamp_(0, V - 1)
         self.iu = torch.arange(self.lo[2], U + hi[2], device=dev).clamp_(0, U - 1)
         self.ix = torch.arange(self.lo[3], X + hi[3], device=dev).clamp_(0, X - 1)
@@ -137,6 +137,7 @@ class Taps4D:
         self.taps = [(a - self.lo[0], b - self.lo[1], c - self.lo[2], e - self.lo[3]) for a, b, c, e in off]
         per_row = len(self.iv) * len(self.iu) * len(self.ix) * C
         self.step = rows_per_block(per_row, block_elements, Y)
+        self.spans = [self._spans(block) for block, _ in self.blocks()]
 
     def blocks(self):
         Y = self.shape[2]
@@ -145,10 +146,27 @@ class Taps4D:
             rows = torch.arange(y0 + self.pad_y[0], y1 + self.pad_y[1], device=self.K.device).clamp_(0, Y - 1)
             yield slice(y0, y1), rows
 
+    def _spans(self, block):
+        """``(s, x0, x1)`` of the taps with a non-zero weight in the rows ``block``: their columns ``x0:x1``.
+
+        With ``p_z != 0`` the shifts vary across the image, so a tap of the
+        exposure may weigh nothing in some rows or columns. Leaving out
+        those zero terms changes no sum.
+        """
+        used = (self.K[:, block] != 0).any(dim=1).to(torch.uint8)  # (S, X)
+        x0 = used.argmax(dim=1)  # the first used column
+        x1 = used.shape[1] - used.flip(1).argmax(dim=1)  # past the last one
+        keep = used.any(dim=1)
+        return [(s, a, b) for s, a, b, k in zip(range(len(keep)), x0.tolist(), x1.tolist(), keep.tolist()) if k]
+
     def _padded(self, T, rows):
         """``T`` at the padded rows ``rows``, replicate-padded in (v, u, x), as (V', U', C, rows', X')."""
-        Tb = T.index_select(2, rows).index_select(3, self.ix)[self.iv[:, None], self.iu[None, :]]
-        return Tb.permute(0, 1, 4, 2, 3).contiguous()
+        # (C, rows', V, U, X) padded in its last three axes in one pass; the offsets bound the padding by
+        # V - 1, U - 1 and X - 1, within what replicate padding takes
+        Tb = T.index_select(2, rows).permute(4, 2, 0, 1, 3)
+        lo, hi = self.lo, self.hi
+        Tp = torch.nn.functional.pad(Tb, (-lo[3], hi[3], -lo[2], hi[2], -lo[0], hi[0]), mode="replicate")
+        return Tp.permute(2, 3, 0, 1, 4)
 
     def _slice(self, t, tap, n_rows):
         V, U, _, X, _ = self.shape
@@ -158,12 +176,12 @@ class Taps4D:
     def forward(self, L):
         V, U = self.shape[:2]
         out = torch.empty_like(L)
-        for block, rows in self.blocks():
+        for (block, rows), spans in zip(self.blocks(), self.spans):
             Lp = self._padded(L, rows)
             n = block.stop - block.start
             acc = Lp.new_zeros((V, U, Lp.shape[2], n, self.shape[3]))
-            for s, tap in enumerate(self.taps):
-                acc.addcmul_(self._slice(Lp, tap, n), self.K[s, block])
+            for s, x0, x1 in spans:
+                acc[..., x0:x1].addcmul_(self._slice(Lp, self.taps[s], n)[..., x0:x1], self.K[s, block, x0:x1])
             out[:, :, block] = acc.permute(0, 1, 3, 4, 2)
         return out
 
@@ -172,17 +190,17 @@ class Taps4D:
         V, U, Y, X, C = self.shape
         gL = torch.zeros_like(G) if need_L else None
         gK = torch.zeros_like(self.K) if need_K else None
-        for block, rows in self.blocks():
+        for (block, rows), spans in zip(self.blocks(), self.spans):
             n = block.stop - block.start
             Gb = G[:, :, block].permute(0, 1, 4, 2, 3).contiguous()
-            if need_K:
+            if need_K:  # every weight's gradient, zero weights included
                 Lp = self._padded(L, rows)
                 for s, tap in enumerate(self.taps):
                     gK[s, block] = (Gb * self._slice(Lp, tap, n)).sum(dim=(0, 1, 2))
             if need_L:
                 gp = Gb.new_zeros((len(self.iv), len(self.iu), C, len(rows), len(self.ix)))
-                for s, tap in enumerate(self.taps):
-                    self._slice(gp, tap, n).addcmul_(Gb, self.K[s, block])
+                for s, x0, x1 in spans:
+                    self._slice(gp, self.taps[s], n)[..., x0:x1].addcmul_(Gb[..., x0:x1], self.K[s, block, x0:x1])
                 # adjoint of the padding: v and u (few) by slices, x and y by index_add
                 g = fold(fold(gp, 0, self.iv_list, V), 1, self.iu_list, U)
                 g = g.new_zeros(g.shape[:4] + (X,)).index_add_(4, self.ix, g)

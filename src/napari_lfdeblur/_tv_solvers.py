@@ -61,11 +61,11 @@ class TVProx:
 
     Each iteration takes a gradient step on the dual field (one component per
     axis, the primal clipped to the box) and projects it onto the unit ball,
-    with step ``1 / (mu L)`` for ``L`` the bound on ``||gradient4d||^2``. The dual field is kept
-    between calls, so each call starts from the previous solution: with the
-    slowly moving ``v`` of an outer iteration a few inner iterations suffice
-    (FISTA's outer momentum carries the acceleration). All work happens in
-    buffers allocated once; ``out`` receives the result.
+    with step ``1 / (mu L)`` for ``L`` the bound on ``||gradient4d||^2``. The
+    dual field is kept between calls, so each call starts from the previous
+    solution: with the slowly moving ``v`` of an outer iteration a few inner
+    iterations suffice (FISTA's outer momentum carries the acceleration). All
+    work happens in buffers allocated once; ``out`` receives the result.
     """
 
     def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box):

@@ -1,7 +1,7 @@
 """Adam for the path fits, without :mod:`torch.optim`.
 
-The first ``torch.optim`` optimiser made in a process imports ``torch._dynamo``:
-over a second and some 70 MB of code, for updating a few control points.
+The first ``torch.optim`` optimiser made in a process imports ``torch._dynamo``,
+a large module that is slow to load, only to update a few control points.
 :class:`Adam` is the same update (Kingma & Ba; torch's single-tensor form
 with its defaults: no weight decay, no AMSGrad).
 """
@@ -33,17 +33,15 @@ class Adam:
         self.betas, self.eps = betas, eps
         self.state = {}
 
-    def zero_grad(self, set_to_none: bool = True) -> None:
+    def zero_grad(self) -> None:
+        """Drop the parameters' gradients (``set_to_none=True`` in torch's terms)."""
         for group in self.param_groups:
             for p in group["params"]:
-                if p.grad is not None:
-                    if set_to_none:
-                        p.grad = None
-                    else:
-                        p.grad.zero_()
+                p.grad = None
 
     @torch.no_grad()
     def step(self) -> None:
+        """One update of every parameter that has a gradient."""
         b1, b2 = self.betas
         for group in self.param_groups:
             for p in group["params"]:

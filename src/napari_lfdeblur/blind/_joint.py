@@ -47,7 +47,7 @@ def iter_joint(g: torch.Tensor, d_inf: float, p: BlindParams, device, rng, box: 
     for it in range(1, jp.n_iter + 1):
         w = max(w0 * jp.prior_decay ** (it - 1), w0 * jp.prior_floor)
         eps = max(jp.eps * jp.eps_decay ** (it - 1), jp.eps_min)
-        opt.zero_grad(set_to_none=True)
+        opt.zero_grad()
         with torch.enable_grad():
             op = BlurOperator(shape, pp.control_points(), n_times=p.n_times, infinity_disparity=d_inf, device=device)
             r = op.forward(L) - g

@@ -237,7 +237,7 @@ def fit_path(pp: PathParam, loss_fn, steps: int, lr: float, every: int = FIT_REP
     best = float("inf")
     stall = 0
     for step in range(1, steps + 1):
-        opt.zero_grad(set_to_none=True)
+        opt.zero_grad()
         with torch.enable_grad():  # whatever the caller's mode (a worker thread may have been left in no_grad)
             each = loss_fn(pp.control_points())
             each.sum().backward()

@@ -170,7 +170,7 @@ class _Fit:
         return (self.q.detach() * self.scale).cpu().double().numpy()
 
     def step(self) -> float:
-        self.opt.zero_grad(set_to_none=True)
+        self.opt.zero_grad()
         with torch.enable_grad():
             cp = self.q * self.scale
             op = BlurOperator(tuple(self.g.shape), cp, n_times=self.rp.n_times, frame=self.frame, device=self.device)
