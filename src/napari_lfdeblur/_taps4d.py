@@ -15,7 +15,9 @@ the bilinear histogram of the 4D lookups the pixel goes through, and
 
 Only the offset quadruples some instant actually uses are kept (the
 ``(v, y)`` offsets of a path trace a band, not a box), and each is one
-multiply-add pass over blocks of rows, whatever ``T``. Clamping the indices
+multiply-add pass over blocks of rows, whatever ``T``, limited in each block
+to the columns where it weighs something (with ``p_z != 0`` the offsets move
+across the image). Clamping the indices
 of the taps reproduces the clamped-coordinate bilinear lookup of the model
 exactly: beyond an edge both taps of an axis read the edge sample.
 """
