@@ -159,7 +159,7 @@ class Taps4D:
         x0 = used.argmax(dim=1)  # the first used column
         x1 = used.shape[1] - used.flip(1).argmax(dim=1)  # past the last one
         keep = used.any(dim=1)
-        return [(s, a, b) for s, a, b, k in zip(range(len(keep)), x0.tolist(), x1.tolist(), keep.tolist()) if k]
+        return [(s, a, b) for s, (a, b, k) in enumerate(zip(x0.tolist(), x1.tolist(), keep.tolist())) if k]
 
     def _padded(self, T, rows):
         """``T`` at the padded rows ``rows``, replicate-padded in (v, u, x), as (V', U', C, rows', X')."""

@@ -265,7 +265,10 @@ def project_tv_dual(P: Sequence[torch.Tensor], radius: float, isotropic: bool = 
     norm = torch.mul(P[0], P[0], out=work) if work is not None else P[0] * P[0]
     for p in P[1:]:
         norm.addcmul_(p, p)
-    scale = (norm.sqrt_() if radius == 1.0 else norm.sqrt_().div_(radius)).clamp_(min=1.0)
+    scale = norm.sqrt_()
+    if radius != 1.0:  # the TV prox's ball is the unit one: no pass for it
+        scale.div_(radius)
+    scale.clamp_(min=1.0)
     for p in P:
         p.div_(scale)
     return tuple(P)
