@@ -66,17 +66,18 @@ class TVProx:
     solution: with the slowly moving ``v`` of an outer iteration a few inner
     iterations suffice (FISTA's outer momentum carries the acceleration). All
     work happens in buffers allocated once; ``out`` receives the result.
+    ``scratch``, two tensors of ``like``'s shape, hold the primal and the
+    dual norm during a call instead of new ones (their contents are lost).
     """
 
-    def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box):
+    def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch=None):
         self.n_inner = n_inner
         self.isotropic = isotropic
         self.aw = axis_weights
         self.box = box
         self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
         self.p = [torch.zeros_like(like) for _ in range(4)]
-        self.x = torch.empty_like(like)
-        self.norm = torch.empty_like(like) if isotropic else None
+        self.x, self.norm = scratch if scratch is not None else (torch.empty_like(like), torch.empty_like(like))
 
     def _primal(self, v, mu, q, out):
         """``v + mu div(q)``, clipped to the box, into ``out``."""
@@ -119,13 +120,16 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
     Kx = op.forward(x)
     Ky, kwork = Kx.clone(), torch.empty_like(Kx)
     y.copy_(x)
-    prox = TVProx(x, n_inner, isotropic, axis_weights, box)
+    # the prox's primal and dual norm live only during a call: in spare and kwork, free then
+    prox = TVProx(x, n_inner, isotropic, axis_weights, box, scratch=(spare, kwork))
     scratch = (work, spare)
     F = _objective(x, Kx, f, weight, isotropic, axis_weights, kwork, scratch)[0]
     t = 1.0
     restarts = evaluations = 0
     for it in range(1, n_iter + 1):
         grad = op.adjoint(torch.sub(Ky, f, out=kwork))
+        if grad.data_ptr() == kwork.data_ptr():  # an adjoint that returns its input: kwork is the prox's scratch
+            grad = grad.clone()
         evaluations += 1
         while True:  # backtracking on the Lipschitz estimate (Beck & Teboulle)
             prox(torch.add(y, grad, alpha=-1.0 / lip, out=work), weight / lip, x_new)

@@ -11,7 +11,7 @@ TILE_MARGIN = 12
 #: smallest tile side (px) worth working on
 MIN_TILE = 32
 #: one-channel float32 tensors alive at once in the final stage, besides the result (see estimate_blind_memory)
-FINAL_TENSORS = 17
+FINAL_TENSORS = 15
 
 
 def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
@@ -38,8 +38,8 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     n = V * U * Y * X
     # the final stage solves one colour channel at a time; float32 tensors of one channel's size:
     # the channel's data (1; it is also the start), FISTA's iterates x, x_new, y and two scratch
-    # buffers, K x, K y, K x_new, the residual and the gradient (10), the TV prox's dual field (4),
-    # its primal and the dual norm (2); and the result, all channels
+    # buffers, K x, K y, K x_new, the residual and the gradient (10), the TV prox's dual field (4;
+    # its primal and dual norm use FISTA's scratch); and the result, all channels
     final = n * 4 * (FINAL_TENSORS + C)
     r = p.path.region
     ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
