@@ -732,3 +732,88 @@ def test_stack_of_views_with_grid_option(tmp_path, lf_rgb):
     np.testing.assert_array_equal(read_lightfield(tmp_path / "g.npy", grid=(V, U)), lf_rgb[..., 0])
     with pytest.raises(LightFieldFormatError, match="needs a stack of 9 views"):
         read_lightfield(tmp_path / "g.npy", grid=(3, 3))
+
+
+# ------------------------------------------------------------------ angular crop
+
+
+def _every_layout(folder, lf8):
+    """``lf8`` (V, U, Y, X, 3) uint8 written in every layout; name -> (path, read options)."""
+    V_, U_ = lf8.shape[:2]
+    out = {"views": (_write_views(folder / "views", lf8, lambda r, c: f"IMG_{r + 1:02d}_{c + 1:02d}"), {})}
+    Y_, X_ = lf8.shape[2:4]
+    iio.imwrite(folder / "grid.png", lf8.swapaxes(1, 2).reshape(V_ * Y_, U_ * X_, 3))  # view (v, u) at block (v, u)
+    out["mosaic"] = (folder / "grid.png", {"layout": "mosaic", "grid": (V_, U_)})
+    np.save(folder / "a.npy", lf8)
+    out["npy"] = (folder / "a.npy", {})
+    np.save(folder / "stack.npy", lf8.reshape((V_ * U_,) + lf8.shape[2:]))
+    out["npy stack"] = (folder / "stack.npy", {"grid": (V_, U_)})
+    np.savez(folder / "b.npz", lf=lf8)
+    out["npz"] = (folder / "b.npz", {})
+    tifffile.imwrite(folder / "c.tif", lf8)
+    out["tiff"] = (folder / "c.tif", {})
+    with h5py.File(folder / "d.h5", "w") as f:
+        f.create_dataset("LF", data=lf8.transpose(3, 2, 4, 1, 0)).attrs["axes"] = "xycuv"
+    out["h5, axes permuted"] = (folder / "d.h5", {})
+    scipy.io.savemat(folder / "e.mat", {"LF": lf8})
+    out["mat v5"] = (folder / "e.mat", {})
+    with h5py.File(folder / "f.mat", "w", userblock_size=512) as f:
+        f.create_dataset("LF", data=lf8.T)
+    with open(folder / "f.mat", "r+b") as fh:
+        fh.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 .")
+    out["mat v7.3"] = (folder / "f.mat", {})
+    return out
+
+
+LAZY = ("views", "npy", "npy stack", "h5, axes permuted", "mat v7.3")  # read only the kept views
+
+
+def test_angular_crop_keeps_the_central_views_in_every_layout(tmp_path):
+    lf8 = np.random.default_rng(5).integers(0, 256, (7, 6, 5, 4, 3), dtype=np.uint8)
+    for name, (path, opts) in _every_layout(tmp_path, lf8).items():
+        out, meta = read_lightfield_with_metadata(path, angular_crop=3, **opts)
+        np.testing.assert_array_equal(out, lf8[2:5, 1:4] / np.float32(255), err_msg=name)
+        assert meta["angular_crop"] == [3, 3], name
+        assert meta["shape"] == [3, 3, 5, 4, 3], name
+        out = read_lightfield(path, angular_crop=(7, 2), **opts)  # (n_v, n_u)
+        np.testing.assert_array_equal(out, lf8[:, 2:4] / np.float32(255), err_msg=name)
+
+
+def test_angular_crop_reads_only_the_kept_views_where_the_layout_allows(tmp_path):
+    lf8 = np.random.default_rng(6).integers(0, 256, (9, 9, 8, 8, 3), dtype=np.uint8)
+    whole, kept = lf8.size * 5, 9 * lf8[0, 0].size * 5  # uint8 samples + their float32 copy
+    for name, (path, opts) in _every_layout(tmp_path, lf8).items():
+        limit = kept + 100
+        if name in LAZY:
+            out = read_lightfield(path, angular_crop=3, max_bytes=limit, **opts)
+            np.testing.assert_array_equal(out, lf8[3:6, 3:6] / np.float32(255), err_msg=name)
+        else:  # read whole, then cropped before the float copy: that is what is checked
+            with pytest.raises(InsufficientMemoryError):
+                read_lightfield(path, angular_crop=3, max_bytes=limit, **opts)
+            read_lightfield(path, angular_crop=3, max_bytes=lf8.size + 9 * lf8[0, 0].size * 4 + 100, **opts)
+        with pytest.raises(InsufficientMemoryError):
+            read_lightfield(path, max_bytes=whole - 100, **opts)
+
+
+@pytest.mark.parametrize("crop", [0, 10, -1, 2.5, "3", True, (3, 3, 3), (3, 0)])
+def test_bad_angular_crop_is_refused_before_reading(tmp_path, lf_gray, crop):
+    np.save(tmp_path / "a.npy", lf_gray)
+    with pytest.raises(ValueError, match="angular_crop"):
+        read_lightfield(tmp_path / "a.npy", angular_crop=crop)
+
+
+def test_cli_angular_crop(tmp_path, lf_rgb, capsys):
+    from napari_lfdeblur.cli import main
+
+    np.save(tmp_path / "a.npy", lf_rgb)
+    assert main(["info", str(tmp_path / "a.npy"), "--angular-crop", "1,2"]) == 0
+    assert f"shape:       {(1, 2) + lf_rgb.shape[2:]}" in capsys.readouterr().out
+    assert main(["simulate", str(tmp_path / "a.npy"), str(tmp_path / "b.npy"), "--angular-crop", "3",
+                 "--path", "linear:1", "--n-times", "4"]) == 0
+    assert np.load(tmp_path / "b.npy").shape == (3, 3) + lf_rgb.shape[2:]
+    assert main(["info", str(tmp_path / "a.npy"), "--angular-crop", "9"]) == 2  # more views than the file has
+    err = capsys.readouterr().err
+    assert "angular_crop=9" in err and len(err.strip().splitlines()) == 1
+    with pytest.raises(SystemExit):
+        main(["info", str(tmp_path / "a.npy"), "--angular-crop", "three"])
+    assert "expected N or NV,NU" in capsys.readouterr().err

@@ -30,11 +30,25 @@ def _progress(iterable=None, **kwargs):
     return tqdm(iterable, **kwargs)
 
 
+def _angular_crop(text: str):
+    """``--angular-crop``: ``N`` or ``NV,NU``."""
+    try:
+        sizes = tuple(int(n) for n in text.replace("x", ",").split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected N or NV,NU such as 9 or 9,9") from None
+    if len(sizes) not in (1, 2):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected N or NV,NU such as 9 or 9,9")
+    return sizes[0] if len(sizes) == 1 else sizes
+
+
 def _input_argument(p, help_text="light field file or folder"):
-    """The INPUT positional and ``--swap-views``, shared by the commands that read a light field."""
+    """The INPUT positional, ``--swap-views`` and ``--angular-crop``, shared by the commands that read a light field."""
     p.add_argument("input", help=help_text)
     p.add_argument("--swap-views", action="store_true",
                    help="swap the two view axes after reading (for exports that name the horizontal view first)")
+    p.add_argument("--angular-crop", type=_angular_crop, default=None, metavar="N",
+                   help="keep only the central N x N views (or NV,NU): a Lytro decode's outer views are dark, and "
+                   "folders, HDF5, MATLAB v7.3 and .npy files then read only the views kept")
 
 
 def _read(args, **options):
@@ -51,6 +65,8 @@ def _read(args, **options):
 
     if not Path(args.input).exists():
         raise CLIError(f"input {args.input} does not exist")
+    if args.angular_crop is not None:
+        options["angular_crop"] = args.angular_crop
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ViewOrderWarning)
         lf, meta = read_lightfield_with_metadata(args.input, **options)

@@ -71,12 +71,12 @@ _SUFFIX_LAYOUT = {
     ".mat": "mat",
 }
 
-# options each layout's reader accepts, besides value_range and max_bytes
+# options each layout's reader accepts, besides value_range, max_bytes and angular_crop
 _OPTIONS = {
     "views": ("scheme", "pattern", "index_base", "grid", "workers"),
     "hci": ("pattern", "index_base", "grid", "workers"),
     "stanford": ("pattern", "index_base", "grid", "workers"),
-    "eslf": ("angular_size", "angular_crop"),
+    "eslf": ("angular_size",),
     "mosaic": ("grid",),
     "mat": ("variable", "drop_weight"),
     "h5": ("dataset", "axes", "grid"),
@@ -195,7 +195,7 @@ def probe_layout(path) -> str | None:
 
 
 def read_lightfield_with_metadata(path, *, layout: str | None = None, value_range=None, max_bytes=None,
-                                  **options) -> tuple[np.ndarray, dict]:
+                                  angular_crop=None, **options) -> tuple[np.ndarray, dict]:
     """Read a light field and describe where it came from.
 
     Parameters are those of :func:`read_lightfield`.
@@ -205,7 +205,8 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
     lf : ndarray, (V, U, Y, X) or (V, U, Y, X, C), float32 in [0, 1]
     metadata : dict
         JSON-serialisable: ``source`` (the path), ``layout``, ``shape``,
-        ``dtype``, ``file_dtype`` (as stored), and layout-specific entries,
+        ``dtype``, ``file_dtype`` (as stored), ``angular_crop`` (``[n_v, n_u]``,
+        when the views were cropped), and layout-specific entries,
         such as ``camera`` (camera parameters when the file has them).
         Metadata stored by :func:`write_lightfield` is in ``saved_metadata``;
         the blur it states, ``n_times`` and ``infinity_disparity`` (as
@@ -224,13 +225,13 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
     if unknown:
         raise TypeError(
             f"option(s) {unknown} do not apply to layout {layout!r}; it accepts {list(allowed)} "
-            f"plus value_range and max_bytes"
+            f"plus value_range, max_bytes and angular_crop"
         )
     if path.is_dir() != (layout in ("views", "hci", "stanford")):
         raise LightFieldFormatError(
             f"{path}: layout {layout!r} expects a {'folder' if layout in ('views', 'hci', 'stanford') else 'file'}"
         )
-    common = {"value_range": value_range, "max_bytes": max_bytes}
+    common = {"value_range": value_range, "max_bytes": max_bytes, "angular_crop": angular_crop}
     if layout in ("views", "hci", "stanford"):
         from ._views import read_views
 
@@ -298,7 +299,8 @@ def _check_view_order(lf, path, metadata) -> None:
         warnings.warn(warning, stacklevel=3)
 
 
-def read_lightfield(path, *, layout: str | None = None, value_range=None, max_bytes=None, **options) -> np.ndarray:
+def read_lightfield(path, *, layout: str | None = None, value_range=None, max_bytes=None, angular_crop=None,
+                    **options) -> np.ndarray:
     """Read a light field from any supported layout.
 
     Parameters
@@ -315,14 +317,19 @@ def read_lightfield(path, *, layout: str | None = None, value_range=None, max_by
         Memory the decoded light field may use; by default the available
         memory (or the ``LFDEBLUR_MEMORY_LIMIT`` environment variable). The
         check runs before any pixel data is decoded.
+    angular_crop : int or (int, int), optional
+        Keep only the central ``n x n`` (or ``n_v x n_u``) views, the block
+        starting at view ``((V - n_v) // 2, (U - n_u) // 2)``. Where the
+        layout allows (folders of views, HDF5, MATLAB v7.3, ``.npy``) only
+        those views are read; the others are read whole and cropped before
+        the conversion to float32.
     **options
         Layout-specific overrides:
 
         - folders (``views``, ``hci``, ``stanford``): ``pattern`` (regex with
           groups ``row``, ``col``), ``index_base`` (0 or 1), ``grid``
           ``(V, U)``, ``workers`` (decoding threads);
-        - ``eslf``: ``angular_size`` (lenslet size A, default 14 or detected),
-          ``angular_crop`` (keep the central n x n views);
+        - ``eslf``: ``angular_size`` (lenslet size A, default 14 or detected);
         - ``mosaic``: ``grid`` ``(V, U)`` (required);
         - ``mat``: ``variable`` (default ``'LF'``), ``drop_weight`` (default True);
         - ``h5``: ``dataset``, ``axes`` (e.g. ``'vuyxc'``; default from the
@@ -352,7 +359,8 @@ def read_lightfield(path, *, layout: str | None = None, value_range=None, max_by
     --------
     >>> lf = read_lightfield("IMG_0001/")                      # doctest: +SKIP
     >>> lf = read_lightfield("scene.eslf.png", angular_crop=9)  # doctest: +SKIP
+    >>> lf = read_lightfield("IMG_0001__Decoded.mat", angular_crop=9)  # doctest: +SKIP
     >>> lf = read_lightfield("grid.png", layout="mosaic", grid=(9, 9))  # doctest: +SKIP
     """
     return read_lightfield_with_metadata(path, layout=layout, value_range=value_range, max_bytes=max_bytes,
-                                         **options)[0]
+                                         angular_crop=angular_crop, **options)[0]

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import LightFieldFormatError, LightFieldReadError, check_memory, to_float01, validate_lightfield
+from ._common import (LightFieldFormatError, LightFieldReadError, central_views, check_memory, to_float01,
+                      validate_lightfield)
 
 _AXIS_ALIASES = {"v": "v", "u": "u", "y": "y", "x": "x", "c": "c", "s": "c", "channel": "c", "channels": "c",
                  "rgb": "c", "color": "c", "colour": "c"}
@@ -43,6 +44,34 @@ def parse_axes(axes, ndim, path) -> tuple[int, ...] | None:
     if sorted(names) != sorted(want):
         raise LightFieldFormatError(f"{path}: axes={axes!r} must name each of {''.join(want)} once")
     return tuple(names.index(a) for a in want)
+
+
+def kept_views(shape, axes, grid, angular_crop, path, meta):
+    """Where the views that ``angular_crop`` keeps lie in an array as stored.
+
+    ``shape`` is the stored array's, ``axes`` and ``grid`` as the readers
+    take them. Returns ``(index, read_shape, grid)``: the index into the
+    stored array (None: all of it), the shape that index reads, and the
+    ``(V, U)`` grid of a stack of views after the crop (None when not a
+    stack). Notes the crop in ``meta``.
+    """
+    if angular_crop is None:
+        return None, tuple(shape), grid
+    if grid is not None:  # a row-major stack of V*U views
+        V, U = (int(g) for g in grid)
+        sv, su = central_views(V, U, angular_crop, path)
+        rows = [r * U + c for r in range(V)[sv] for c in range(U)[su]]
+        index, read = (rows,), (len(rows),) + tuple(shape[1:])
+        grid = (sv.stop - sv.start, su.stop - su.start)
+    else:
+        perm = parse_axes(axes, len(shape), path) or tuple(range(len(shape)))
+        sv, su = central_views(shape[perm[0]], shape[perm[1]], angular_crop, path)
+        index, read = [slice(None)] * len(shape), list(shape)
+        index[perm[0]], index[perm[1]] = sv, su
+        read[perm[0]], read[perm[1]] = sv.stop - sv.start, su.stop - su.start
+        index, read = tuple(index), tuple(read)
+    meta["angular_crop"] = [sv.stop - sv.start, su.stop - su.start]
+    return index, read, grid
 
 
 def _finish(raw, path, meta, axes, value_range, grid=None):
@@ -99,19 +128,24 @@ def npy_header(path) -> tuple[tuple[int, ...], np.dtype]:
     return tuple(shape), np.dtype(dtype)
 
 
-def read_npy(path, *, axes=None, grid=None, value_range=None, max_bytes=None):
+def read_npy(path, *, axes=None, grid=None, value_range=None, max_bytes=None, angular_crop=None):
     path = Path(path)
     try:
         shape, dtype = npy_header(path)
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: not a readable .npy file ({type(exc).__name__}: {exc})") from None
     _shape_error(shape, path, grid=grid)
-    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
+    meta: dict = {"layout": "npy"}
+    index, read, grid = kept_views(shape, axes, grid, angular_crop, path, meta)
+    check_memory(read, dtype.itemsize, path, max_bytes=max_bytes)  # a memory map reads only the kept views
     try:
-        raw = np.load(path, allow_pickle=False)
+        if index is None:
+            raw = np.load(path, allow_pickle=False)
+        else:
+            raw = np.array(np.load(path, allow_pickle=False, mmap_mode="r")[index])
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: cannot read the data, the file may be truncated ({exc})") from None
-    return _finish(raw, path, {"layout": "npy"}, axes, value_range, grid)
+    return _finish(raw, path, meta, axes, value_range, grid)
 
 
 def npz_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
@@ -158,7 +192,7 @@ def npz_lightfield_key(path, headers=None) -> str | None:
     return None
 
 
-def read_npz(path, *, key=None, axes=None, grid=None, value_range=None, max_bytes=None):
+def read_npz(path, *, key=None, axes=None, grid=None, value_range=None, max_bytes=None, angular_crop=None):
     path = Path(path)
     try:
         headers = npz_headers(path)
@@ -174,11 +208,12 @@ def read_npz(path, *, key=None, axes=None, grid=None, value_range=None, max_byte
         raise LightFieldFormatError(f"{path}: no array {key!r} (found {sorted(headers)})")
     shape, dtype = headers[key]
     _shape_error(shape, path, f"array {key!r}", grid)
-    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
     meta: dict = {"layout": "npz", "key": key}
+    index, read, grid = kept_views(shape, axes, grid, angular_crop, path, meta)
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=read)  # read whole
     try:
         with np.load(path, allow_pickle=False) as z:
-            raw = z[key]
+            raw = z[key] if index is None else z[key][index]
             if METADATA_KEY in z.files:
                 meta.update(_load_json_meta(z[METADATA_KEY]))
             if "control_points" in z.files and key != "control_points":
@@ -218,7 +253,7 @@ def tiff_shape(path) -> tuple[tuple[int, ...], np.dtype, dict]:
         return tuple(s.shape), np.dtype(s.dtype), meta
 
 
-def read_tiff(path, *, axes=None, grid=None, value_range=None, max_bytes=None):
+def read_tiff(path, *, axes=None, grid=None, value_range=None, max_bytes=None, angular_crop=None):
     import tifffile
 
     path = Path(path)
@@ -237,12 +272,15 @@ def read_tiff(path, *, axes=None, grid=None, value_range=None, max_bytes=None):
             f"{tuple(shape)}; pass grid=(V, U) to arrange them as a V x U light field"
         )
     _shape_error(shape, path, "the TIFF image series", grid)
-    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
+    index, read, grid = kept_views(shape, axes, grid, angular_crop, path, meta)
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=read)  # decoded whole
     try:
         raw = tifffile.imread(path)
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: cannot decode the TIFF data ({type(exc).__name__}: {exc})") from None
     raw = raw.reshape(shape)
+    if index is not None:
+        raw = raw[index]
     if METADATA_KEY in tmeta:
         meta.update(_load_json_meta(tmeta[METADATA_KEY]))
     return _finish(raw, path, meta, axes, value_range, grid)
@@ -287,7 +325,7 @@ def h5_lightfield_name(f) -> str | None:
     return found[0] if len(found) == 1 else None
 
 
-def read_h5(path, *, dataset=None, axes=None, grid=None, value_range=None, max_bytes=None):
+def read_h5(path, *, dataset=None, axes=None, grid=None, value_range=None, max_bytes=None, angular_crop=None):
     import h5py
 
     path = Path(path)
@@ -304,7 +342,6 @@ def read_h5(path, *, dataset=None, axes=None, grid=None, value_range=None, max_b
             raise LightFieldFormatError(f"{path}: {what} (found {datasets[:10]}); pass dataset=")
         ds = f[name]
         _shape_error(ds.shape, path, f"dataset {name!r}", grid)
-        check_memory(ds.shape, ds.dtype.itemsize, path, max_bytes=max_bytes)
         if axes is None:
             for attr in ("axes", "axis_order", "dims", "dimension_order", "lfdeblur_axes"):
                 if attr in ds.attrs:
@@ -312,11 +349,13 @@ def read_h5(path, *, dataset=None, axes=None, grid=None, value_range=None, max_b
                     if isinstance(axes, np.ndarray):
                         axes = [a.decode() if isinstance(a, bytes) else str(a) for a in axes.tolist()]
                     break
+        meta: dict = {"layout": "h5", "dataset": name}
+        index, read, grid = kept_views(ds.shape, axes, grid, angular_crop, path, meta)
+        check_memory(read, ds.dtype.itemsize, path, max_bytes=max_bytes)  # HDF5 reads only the kept views
         try:
-            raw = ds[()]
+            raw = ds[()] if index is None else ds[index]
         except Exception as exc:  # noqa: BLE001
             raise LightFieldReadError(f"{path}: cannot read dataset {name!r} ({type(exc).__name__}: {exc})") from None
-        meta: dict = {"layout": "h5", "dataset": name}
         cam = {**_attrs_to_dict(f.attrs), **_attrs_to_dict(ds.attrs)}
         cam = {k: v for k, v in cam.items() if k not in ("axes", "axis_order", "dims", "dimension_order",
                                                           "lfdeblur_axes")}

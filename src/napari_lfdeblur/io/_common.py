@@ -6,6 +6,7 @@ Nothing here imports napari or Qt.
 
 from __future__ import annotations
 
+import operator
 import os
 import shutil
 import uuid
@@ -26,6 +27,7 @@ __all__ = [
     "MEMORY_LIMIT_ENV",
     "available_memory",
     "check_memory",
+    "central_views",
     "to_float01",
     "validate_lightfield",
     "atomic_file",
@@ -81,13 +83,13 @@ def _fmt_bytes(n: float) -> str:
     return f"{n:.1f} TiB"  # pragma: no cover
 
 
-def check_memory(shape, source_itemsize: int, path, *, max_bytes=None) -> int:
+def check_memory(shape, source_itemsize: int, path, *, max_bytes=None, out_shape=None) -> int:
     """Raise before allocating if decoding ``shape`` would not fit in memory.
 
     Parameters
     ----------
     shape : tuple of int
-        Shape of the decoded light field.
+        Shape of the data read from the file.
     source_itemsize : int
         Bytes per element of the data as stored (the float32 result needs 4
         more per element, unless the source is float32 already).
@@ -95,6 +97,10 @@ def check_memory(shape, source_itemsize: int, path, *, max_bytes=None) -> int:
         The file, for the message.
     max_bytes : int, optional
         Limit in bytes; default :func:`available_memory`.
+    out_shape : tuple of int, optional
+        Shape of the float32 result when it is smaller than what is read (a
+        file read whole and then cropped to its central views); default
+        ``shape``.
 
     Returns
     -------
@@ -102,7 +108,8 @@ def check_memory(shape, source_itemsize: int, path, *, max_bytes=None) -> int:
         The estimated number of bytes.
     """
     n = int(np.prod([int(s) for s in shape], dtype=np.float64))
-    need = n * (int(source_itemsize) + 4)
+    n_out = n if out_shape is None else int(np.prod([int(s) for s in out_shape], dtype=np.float64))
+    need = n * int(source_itemsize) + n_out * 4
     limit = available_memory() if max_bytes is None else int(max_bytes)
     if need > limit:
         raise InsufficientMemoryError(
@@ -111,6 +118,32 @@ def check_memory(shape, source_itemsize: int, path, *, max_bytes=None) -> int:
             f"it first, or read it on a machine with more memory"
         )
     return need
+
+
+def central_views(V: int, U: int, angular_crop, path) -> tuple[slice, slice]:
+    """The central views that ``angular_crop`` keeps of a ``V x U`` grid, as two slices.
+
+    ``angular_crop`` is ``n`` (keep ``n x n`` views) or ``(n_v, n_u)``. The
+    kept block starts at view ``(V - n_v) // 2``, ``(U - n_u) // 2``.
+
+    Raises
+    ------
+    ValueError
+        When a size is not an integer between 1 and the grid's.
+    """
+    try:
+        n_v, n_u = (angular_crop, angular_crop) if np.ndim(angular_crop) == 0 else angular_crop
+        ok = not any(isinstance(n, bool) for n in (n_v, n_u))
+        n_v, n_u = operator.index(n_v), operator.index(n_u)  # integers only
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or not (1 <= n_v <= V and 1 <= n_u <= U):
+        raise ValueError(
+            f"{path}: angular_crop={angular_crop!r} must be n or (n_v, n_u) with 1 <= n_v <= {V} and "
+            f"1 <= n_u <= {U} (the file has {V} x {U} views)"
+        )
+    v0, u0 = (V - n_v) // 2, (U - n_u) // 2
+    return slice(v0, v0 + n_v), slice(u0, u0 + n_u)
 
 
 # ----------------------------------------------------------------- values

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._arrays import kept_views
 from ._common import LightFieldFormatError, LightFieldReadError, check_memory, to_float01, validate_lightfield
 
 
@@ -49,7 +50,7 @@ def is_hdf5(path: Path) -> bool:
     return b"\x89HDF\r\n\x1a\n" in head
 
 
-def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_bytes=None):
+def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_bytes=None, angular_crop=None):
     """Read a Light Field Toolbox ``.mat`` file (MATLAB v5 or v7.3).
 
     Parameters
@@ -58,6 +59,9 @@ def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_byt
         Name of the light-field variable (default ``'LF'``).
     drop_weight : bool
         Drop the fourth (weight) channel of a 4-channel ``LF``.
+    angular_crop : int or (int, int), optional
+        Keep only the central views. A v7.3 file reads only those; a v5
+        file is read whole, then cropped.
 
     Returns
     -------
@@ -81,9 +85,10 @@ def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_byt
             shape = tuple(reversed(ds.shape))
             meta["mat_version"] = "7.3"
             _check_shape(shape, path, variable)
-            check_memory(shape, ds.dtype.itemsize, path, max_bytes=max_bytes)
+            index, read, _ = kept_views(shape, None, None, angular_crop, path, meta)
+            check_memory(read, ds.dtype.itemsize, path, max_bytes=max_bytes)
             try:
-                raw = ds[()]
+                raw = ds[()] if index is None else ds[index[::-1]]
             except Exception as exc:  # noqa: BLE001
                 raise LightFieldReadError(f"{path}: cannot read variable {variable!r} ({exc})") from None
             raw = np.transpose(raw)  # v7.3 stores the axes reversed
@@ -101,13 +106,14 @@ def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_byt
         shape, cls = found[variable]
         itemsize = {"uint8": 1, "int8": 1, "uint16": 2, "int16": 2, "single": 4, "uint32": 4, "int32": 4}.get(cls, 8)
         _check_shape(shape, path, variable)
-        check_memory(shape, itemsize, path, max_bytes=max_bytes)
+        index, read, _ = kept_views(shape, None, None, angular_crop, path, meta)
+        check_memory(shape, itemsize, path, max_bytes=max_bytes, out_shape=read)  # read whole
         try:
             small = [n for n, (s, _c) in found.items() if n != variable and np.prod(s) <= 4096]
             loaded = scipy.io.loadmat(path, variable_names=[variable, *small])
         except Exception as exc:  # noqa: BLE001
             raise LightFieldReadError(f"{path}: cannot read variable {variable!r} ({type(exc).__name__}: {exc})") from None
-        raw = loaded[variable]
+        raw = loaded[variable] if index is None else loaded[variable][index]
         meta["mat_version"] = "5"
         meta["variables"] = sorted(found)
         extra = {n: _small_metadata(loaded[n]) for n in small}

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import LightFieldFormatError, check_memory, to_float01
+from ._common import LightFieldFormatError, central_views, check_memory, to_float01
 from ._images import image_props, read_image
 
 DEFAULT_ANGULAR_SIZE = 14
@@ -43,15 +43,21 @@ def _drop_opaque_alpha(img: np.ndarray) -> np.ndarray:
     return img
 
 
-def _crop_angular(lf: np.ndarray, n, path) -> np.ndarray:
-    if n is None:
+def _crop_angular(lf: np.ndarray, angular_crop, path, meta: dict) -> np.ndarray:
+    """The central views of ``lf`` that ``angular_crop`` keeps (all when None); notes the crop in ``meta``."""
+    if angular_crop is None:
         return lf
-    n = int(n)
-    V, U = lf.shape[:2]
-    if not 1 <= n <= min(V, U):
-        raise ValueError(f"{path}: angular_crop={n} must be between 1 and {min(V, U)}")
-    v0, u0 = (V - n) // 2, (U - n) // 2
-    return np.ascontiguousarray(lf[v0 : v0 + n, u0 : u0 + n])
+    sv, su = central_views(lf.shape[0], lf.shape[1], angular_crop, path)
+    meta["angular_crop"] = [sv.stop - sv.start, su.stop - su.start]
+    return lf[sv, su]
+
+
+def _cropped_shape(shape, angular_crop, path) -> tuple[int, ...]:
+    """The light-field shape ``(V, U, ...)`` after :func:`_crop_angular`."""
+    if angular_crop is None:
+        return tuple(shape)
+    sv, su = central_views(shape[0], shape[1], angular_crop, path)
+    return (sv.stop - sv.start, su.stop - su.start) + tuple(shape[2:])
 
 
 def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, max_bytes=None):
@@ -62,9 +68,9 @@ def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, m
     angular_size : int, optional
         Lenslet size ``A`` in pixels (views per side). Default 14, or the only
         size that divides the image.
-    angular_crop : int, optional
-        Keep only the central ``n x n`` views (the outer ones of a Lytro ESLF
-        are dark).
+    angular_crop : int or (int, int), optional
+        Keep only the central ``n x n`` (or ``n_v x n_u``) views (the outer
+        ones of a Lytro ESLF are dark).
 
     Returns
     -------
@@ -82,21 +88,22 @@ def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, m
             raise ValueError(f"angular_size must be positive, not {angular_size}")
     if H < A or W < A:
         raise LightFieldFormatError(f"{path}: a {H}x{W} image is smaller than one {A}x{A} lenslet")
-    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
+    out = _cropped_shape((A, A, H // A, W // A) + tuple(shape[2:]), angular_crop, path)
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=out)
     img = _drop_opaque_alpha(read_image(path))
     Y, X = img.shape[0] // A, img.shape[1] // A
     img = img[: Y * A, : X * A]
     lf = img.reshape((Y, A, X, A) + img.shape[2:])
     lf = np.moveaxis(lf, (1, 3), (0, 1))  # (A, A, Y, X[, C])
-    lf = _crop_angular(lf, angular_crop, path)
     meta = {"layout": "eslf", "angular_size": A, "file_dtype": str(img.dtype), "mosaic_shape": [H, W]}
-    if angular_crop is not None:
-        meta["angular_crop"] = int(angular_crop)
+    lf = _crop_angular(lf, angular_crop, path, meta)
     return to_float01(np.ascontiguousarray(lf), path, value_range=value_range), meta
 
 
-def read_mosaic(path, *, grid=None, value_range=None, max_bytes=None):
+def read_mosaic(path, *, grid=None, value_range=None, max_bytes=None, angular_crop=None):
     """Read a view-grid mosaic: views tiled as ``grid = (V, U)`` blocks.
+
+    ``angular_crop`` keeps the central views, as in :func:`read_eslf`.
 
     Returns
     -------
@@ -117,11 +124,13 @@ def read_mosaic(path, *, grid=None, value_range=None, max_bytes=None):
         raise LightFieldFormatError(
             f"{path}: a {H}x{W} image does not split into a {V}x{U} grid of equal views"
         )
-    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes)
+    out = _cropped_shape((V, U, H // V, W // U) + tuple(shape[2:]), angular_crop, path)
+    check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=out)
     img = _drop_opaque_alpha(read_image(path))
     Y, X = H // V, W // U
     lf = img.reshape((V, Y, U, X) + img.shape[2:]).swapaxes(1, 2)
     meta = {"layout": "mosaic", "grid": [V, U], "file_dtype": str(img.dtype), "mosaic_shape": [H, W]}
+    lf = _crop_angular(lf, angular_crop, path, meta)
     return to_float01(np.ascontiguousarray(lf), path, value_range=value_range), meta
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import LightFieldFormatError, check_memory, to_float01
+from ._common import LightFieldFormatError, central_views, check_memory, to_float01
 from ._images import IMAGE_EXTENSIONS, image_props, read_image
 
 _EXT = r"\.(?:png|jpe?g|tiff?|bmp)$"
@@ -269,7 +269,7 @@ def _map_views(folder: Path, scheme: str, pattern=None, index_base=None, grid=No
 
 
 def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None, value_range=None,
-               max_bytes=None, workers=None):
+               max_bytes=None, workers=None, angular_crop=None):
     """Read a folder of view images.
 
     Parameters
@@ -285,8 +285,9 @@ def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None,
         Base of the indices in the names.
     grid : (int, int), optional
         ``(V, U)`` when it cannot be inferred (non-square HCI grids).
-    value_range, max_bytes :
-        See :func:`napari_lfdeblur.io.read_lightfield`.
+    value_range, max_bytes, angular_crop :
+        See :func:`napari_lfdeblur.io.read_lightfield`; with ``angular_crop``
+        only the central views are decoded.
 
     Returns
     -------
@@ -303,12 +304,17 @@ def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None,
             )
     elif scheme not in SCHEMES:
         raise ValueError(f"unknown naming scheme {scheme!r}; choose one of {SCHEMES}")
-    views, (V, U), info = _map_views(folder, scheme, pattern, index_base, grid)
-    first = folder / views[(0, 0)]
+    views, (V_file, U_file), info = _map_views(folder, scheme, pattern, index_base, grid)
+    rows, cols = range(V_file), range(U_file)
+    if angular_crop is not None:
+        sv, su = central_views(V_file, U_file, angular_crop, folder)
+        rows, cols = rows[sv], cols[su]
+    V, U = len(rows), len(cols)
+    keys = [(r, c) for r in rows for c in cols]
+    first = folder / views[keys[0]]
     shape0, dtype0 = image_props(first)
     check_memory((V, U) + tuple(shape0), dtype0.itemsize, folder, max_bytes=max_bytes)
 
-    keys = [(r, c) for r in range(V) for c in range(U)]
     paths = [folder / views[k] for k in keys]
     n_workers = workers or min(8, os.cpu_count() or 1, len(paths))
     with ThreadPoolExecutor(max_workers=max(1, n_workers)) as pool:
@@ -316,7 +322,7 @@ def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None,
         first_img = next(it)
         raw = np.empty((V, U) + first_img.shape, first_img.dtype)
         raw[0, 0] = first_img
-        for (r, c), p, img in zip(keys[1:], paths[1:], it):
+        for i, ((r, c), p, img) in enumerate(zip(keys[1:], paths[1:], it), start=1):
             if img.shape != first_img.shape:
                 raise LightFieldFormatError(
                     f"{p}: view ({r}, {c}) has shape {img.shape} but {paths[0].name} has {first_img.shape}; "
@@ -327,15 +333,17 @@ def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None,
                     f"{p}: view has dtype {img.dtype} but {paths[0].name} has {first_img.dtype}; "
                     f"all views must have the same bit depth"
                 )
-            raw[r, c] = img
+            raw[i // U, i % U] = img
     lf = to_float01(raw, folder, value_range=value_range)
     meta = {
         "layout": {"rc": "views", "hci": "hci", "stanford": "stanford"}[scheme],
         "naming": scheme,
-        "n_views": [V, U],
+        "n_views": [V_file, U_file],
         "file_dtype": str(first_img.dtype),
-        "files": [views[k] for k in ((0, 0), (V - 1, U - 1))],
+        "files": [views[k] for k in (keys[0], keys[-1])],
     }
+    if angular_crop is not None:
+        meta["angular_crop"] = [V, U]
     if "index_base" in info:
         meta["index_base"] = info["index_base"]
     if "camera" in info:
@@ -343,7 +351,7 @@ def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None,
     if "camera_positions" in info:
         pos = info["camera_positions"]
         meta["camera"] = {
-            "positions": [[list(pos.get((r, c), (math.nan, math.nan))) for c in range(U)] for r in range(V)],
+            "positions": [[list(pos.get((r, c), (math.nan, math.nan))) for c in cols] for r in rows],
             "positions_note": "the two numbers after out_RR_CC_ in each file name, per view (v, u)",
         }
     saved = folder / "lightfield.json"
