@@ -102,11 +102,13 @@ def child(task: dict) -> dict:
 
         t0 = time.perf_counter()
         res = blind_deblur(lf, device=task["device"], require_evidence=False)
+        out.update(blind_s=time.perf_counter() - t0, peak_gb=peak_rss() / GB)  # before the PSNR's own copies
         sharp = np.load(task["sharp"])
-        out.update(blind_s=time.perf_counter() - t0, path_s=res.timings["path"], final_s=res.timings["final"],
-                   blur_found=bool(res.info["blur_found"]), gain=psnr(res.lightfield, sharp) - psnr(lf, sharp),
+        out.update(path_s=res.timings["path"], final_s=res.timings["final"], blur_found=bool(res.info["blur_found"]),
+                   gain=psnr(res.lightfield, sharp) - psnr(lf, sharp),
                    estimate_gb=(estimate_blind_memory(lf.shape) + lf.nbytes) / GB)
-    out["peak_gb"] = peak_rss() / GB
+    else:
+        out["peak_gb"] = peak_rss() / GB
     return out
 
 
