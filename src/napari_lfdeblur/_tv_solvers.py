@@ -66,18 +66,19 @@ class TVProx:
     solution: with the slowly moving ``v`` of an outer iteration a few inner
     iterations suffice (FISTA's outer momentum carries the acceleration). All
     work happens in buffers allocated once; ``out`` receives the result.
-    ``scratch``, two tensors of ``like``'s shape, hold the primal and the
-    dual norm during a call instead of new ones (their contents are lost).
+    ``scratch``, two tensors of ``like``'s shape that the caller does not
+    need during a call, hold the primal and the dual norm (their contents
+    are lost).
     """
 
-    def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch=None):
+    def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch):
         self.n_inner = n_inner
         self.isotropic = isotropic
         self.aw = axis_weights
         self.box = box
         self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
         self.p = [torch.zeros_like(like) for _ in range(4)]
-        self.x, self.norm = scratch if scratch is not None else (torch.empty_like(like), torch.empty_like(like))
+        self.x, self.norm = scratch
 
     def _primal(self, v, mu, q, out):
         """``v + mu div(q)``, clipped to the box, into ``out``."""

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import LightFieldFormatError, central_views, check_memory, to_float01
+from ._arrays import kept_views
+from ._common import LightFieldFormatError, check_memory, to_float01
 from ._images import image_props, read_image
 
 DEFAULT_ANGULAR_SIZE = 14
@@ -41,23 +42,6 @@ def _drop_opaque_alpha(img: np.ndarray) -> np.ndarray:
         if np.all(img[..., 3] == top):
             return img[..., :3]
     return img
-
-
-def _crop_angular(lf: np.ndarray, angular_crop, path, meta: dict) -> np.ndarray:
-    """The central views of ``lf`` that ``angular_crop`` keeps (all when None); notes the crop in ``meta``."""
-    if angular_crop is None:
-        return lf
-    sv, su = central_views(lf.shape[0], lf.shape[1], angular_crop, path)
-    meta["angular_crop"] = [sv.stop - sv.start, su.stop - su.start]
-    return lf[sv, su]
-
-
-def _cropped_shape(shape, angular_crop, path) -> tuple[int, ...]:
-    """The light-field shape ``(V, U, ...)`` after :func:`_crop_angular`."""
-    if angular_crop is None:
-        return tuple(shape)
-    sv, su = central_views(shape[0], shape[1], angular_crop, path)
-    return (sv.stop - sv.start, su.stop - su.start) + tuple(shape[2:])
 
 
 def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, max_bytes=None):
@@ -88,15 +72,16 @@ def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, m
             raise ValueError(f"angular_size must be positive, not {angular_size}")
     if H < A or W < A:
         raise LightFieldFormatError(f"{path}: a {H}x{W} image is smaller than one {A}x{A} lenslet")
-    out = _cropped_shape((A, A, H // A, W // A) + tuple(shape[2:]), angular_crop, path)
+    meta = {"layout": "eslf", "angular_size": A, "mosaic_shape": [H, W]}
+    index, out, _ = kept_views((A, A, H // A, W // A) + tuple(shape[2:]), None, None, angular_crop, path, meta)
     check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=out)
     img = _drop_opaque_alpha(read_image(path))
     Y, X = img.shape[0] // A, img.shape[1] // A
     img = img[: Y * A, : X * A]
     lf = img.reshape((Y, A, X, A) + img.shape[2:])
     lf = np.moveaxis(lf, (1, 3), (0, 1))  # (A, A, Y, X[, C])
-    meta = {"layout": "eslf", "angular_size": A, "file_dtype": str(img.dtype), "mosaic_shape": [H, W]}
-    lf = _crop_angular(lf, angular_crop, path, meta)
+    meta["file_dtype"] = str(img.dtype)
+    lf = lf if index is None else lf[index]
     return to_float01(np.ascontiguousarray(lf), path, value_range=value_range), meta
 
 
@@ -124,13 +109,14 @@ def read_mosaic(path, *, grid=None, value_range=None, max_bytes=None, angular_cr
         raise LightFieldFormatError(
             f"{path}: a {H}x{W} image does not split into a {V}x{U} grid of equal views"
         )
-    out = _cropped_shape((V, U, H // V, W // U) + tuple(shape[2:]), angular_crop, path)
+    meta = {"layout": "mosaic", "grid": [V, U], "mosaic_shape": [H, W]}
+    index, out, _ = kept_views((V, U, H // V, W // U) + tuple(shape[2:]), None, None, angular_crop, path, meta)
     check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=out)
     img = _drop_opaque_alpha(read_image(path))
     Y, X = H // V, W // U
     lf = img.reshape((V, Y, U, X) + img.shape[2:]).swapaxes(1, 2)
-    meta = {"layout": "mosaic", "grid": [V, U], "file_dtype": str(img.dtype), "mosaic_shape": [H, W]}
-    lf = _crop_angular(lf, angular_crop, path, meta)
+    meta["file_dtype"] = str(img.dtype)
+    lf = lf if index is None else lf[index]
     return to_float01(np.ascontiguousarray(lf), path, value_range=value_range), meta
 
 

@@ -231,9 +231,6 @@ class BlindDeblurWidget(SolverWidget):
         self._next_draw = 0.0
         self.preview_updates = 0
         self.path_preview_updates = 0
-        # napari imports pandas for the features table of the first Shapes layer it makes (about half a
-        # second); the path preview is such a layer, drawn in Qt's thread during a run: pay it now instead
-        import pandas  # noqa: F401
         return lambda: gen
 
     def on_progress(self, progress) -> None:
