@@ -49,8 +49,15 @@ def napari_get_reader(path):
     return read_lightfield_layer
 
 
-def read_lightfield_layer(path):
+def read_lightfield_layer(path, **options):
     """Read a light field into a napari layer data tuple.
+
+    Parameters
+    ----------
+    path : str or Path (or a list of one)
+    **options
+        Passed to :func:`napari_lfdeblur.io.read_lightfield_with_metadata`
+        (``angular_crop``, ``layout``, ...); napari itself passes none.
 
     Returns
     -------
@@ -61,7 +68,7 @@ def read_lightfield_layer(path):
         known, ...).
     """
     p = Path(_single_path(path))
-    lf, meta = read_lightfield_with_metadata(p)
+    lf, meta = read_lightfield_with_metadata(p, **options)
     meta = {**meta, "kind": "input"}
     name = p.name
     for suffix in (".eslf.png", ".png", ".npz", ".npy", ".tiff", ".tif", ".hdf5", ".h5", ".mat"):

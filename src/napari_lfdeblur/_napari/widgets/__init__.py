@@ -7,7 +7,7 @@ records and result into a progress bar, previews and layers.
 
 from __future__ import annotations
 
-__all__ = ["SimulateBlurWidget", "DeconvolveWidget", "BlindDeblurWidget", "EpiWidget"]
+__all__ = ["SimulateBlurWidget", "DeconvolveWidget", "BlindDeblurWidget", "EpiWidget", "OpenLightFieldWidget"]
 
 
 def __getattr__(name):
@@ -27,4 +27,8 @@ def __getattr__(name):
         from .epi import EpiWidget
 
         return EpiWidget
+    if name == "OpenLightFieldWidget":
+        from .open import OpenLightFieldWidget
+
+        return OpenLightFieldWidget
     raise AttributeError(name)

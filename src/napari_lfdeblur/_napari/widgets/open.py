@@ -1,0 +1,145 @@
+"""The *Open light field* dock widget: *File > Open* with the reader's options.
+
+napari's reader hook takes a path and nothing else, so it always opens every
+view. This widget opens a light field with the options of
+:func:`napari_lfdeblur.io.read_lightfield` that matter for large decodes:
+``angular_crop`` (keep the central views; a Light Field Toolbox decode of a
+Lytro Illum holds 15 x 15 views whose outer ones are dark, and people keep
+9 x 9) and the layout, when its detection needs help. Where the layout allows
+it, only the kept views are read from disk. The file is read in a worker
+thread; a file that cannot be read, or would not fit in memory, becomes an
+error notification, and no layer is added or replaced.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, Label, PushButton
+from napari.qt.threading import thread_worker
+
+from ...io import LAYOUTS, probe_layout
+from ..layers import add_layer
+from ..reader import read_lightfield_layer
+from ._controls import heading, notify_error, notify_info, spin
+
+__all__ = ["OpenLightFieldWidget"]
+
+_CROP_TIP = ("keep only the central views, n_v x n_u (0: all views). A Light Field Toolbox decode of a "
+             "Lytro Illum is 15 x 15 and its outer views are dark: 9 x 9 is usual. Layouts that store "
+             "views separately (folders, HDF5, MATLAB v7.3, .npy) read only the kept views.")
+
+
+class OpenLightFieldWidget(Container):
+    """Dock widget: open a light field with an angular crop and a chosen layout.
+
+    Fields: ``source`` (a file, or a folder of views with *folder of views*
+    ticked), ``views_v`` and ``views_u`` (central views kept, 0 for all),
+    ``layout`` (``'auto'`` or one of :data:`napari_lfdeblur.io.LAYOUTS`),
+    *Open* and a status line. The new layer is added beside any layer of the
+    same name (napari makes the name unique); nothing is replaced.
+    """
+
+    def __init__(self, napari_viewer):
+        self.viewer = napari_viewer
+        self.worker = None
+        self.source = FileEdit(name="source", label="file", mode="r",
+                               tooltip="a light-field file (.mat, .h5, .npy, .npz, .tif, .eslf.png)")
+        self.folder_box = CheckBox(name="folder", text="folder of views", value=False,
+                                   tooltip="open a folder of view images (Lytro toolbox, HCI, Stanford names)")
+        self.views_v = spin("views_v", 0, 0, 99, label="views kept (rows)", tooltip=_CROP_TIP)
+        self.views_u = spin("views_u", 0, 0, 99, label="views kept (columns)", tooltip=_CROP_TIP)
+        self.layout_combo = ComboBox(name="layout", label="layout", choices=("auto",) + LAYOUTS, value="auto",
+                                     tooltip="how the file stores the views; 'auto' detects it")
+        self.open_button = PushButton(name="open_button", text="Open")
+        self.status = Label(name="status", value="choose a file")
+        super().__init__(widgets=[heading("Open a light field"), self.source, self.folder_box, self.views_v,
+                                  self.views_u, self.layout_combo, self.open_button, self.status])
+        self.folder_box.changed.connect(self._folder_toggled)
+        self.source.changed.connect(self._source_changed)
+        self.open_button.changed.connect(self.open)
+        self.native.layout().addStretch(1)
+
+    def _folder_toggled(self, on: bool):
+        self.source.mode = "d" if on else "r"
+
+    def _source_changed(self, *_):
+        path = self._path()
+        if path is None:
+            self.status.value = "choose a file"
+            return
+        try:
+            layout = probe_layout(path)
+        except Exception:  # noqa: BLE001 - a status line, never a traceback
+            layout = None
+        self.status.value = (f"layout: {layout}" if layout else
+                             "not recognised as a light field; choose its layout to try anyway")
+
+    def _path(self) -> Path | None:
+        value = self.source.value
+        if value is None or str(value) in ("", "."):
+            return None
+        return Path(value)
+
+    def angular_crop(self) -> tuple[int, int] | None:
+        """The crop the form asks for: ``(n_v, n_u)``, or None for all views.
+
+        Raises
+        ------
+        ValueError
+            When only one of the two numbers is set.
+        """
+        n_v, n_u = self.views_v.value, self.views_u.value
+        if n_v == 0 and n_u == 0:
+            return None
+        if n_v == 0 or n_u == 0:
+            raise ValueError("set both numbers of views kept, or neither (0 keeps all views)")
+        return n_v, n_u
+
+    def open(self, *_):
+        """Read the chosen light field in a worker thread; returns the worker, or None on bad input."""
+        if self.worker is not None:
+            return None
+        path = self._path()
+        if path is None:
+            notify_error("Open a light field: choose a file first")
+            return None
+        try:
+            crop = self.angular_crop()
+        except ValueError as exc:
+            notify_error(f"Open a light field: {exc}")
+            return None
+        options = {} if crop is None else {"angular_crop": crop}
+        if self.layout_combo.value != "auto":
+            options["layout"] = self.layout_combo.value
+        self.status.value = f"reading {path.name} ..."
+        self.open_button.enabled = False
+        worker = thread_worker(_read, start_thread=False)(path, options)
+        worker.returned.connect(self._on_returned)
+        worker.finished.connect(self._on_finished)
+        self.worker = worker
+        worker.start()
+        return worker
+
+    def _on_returned(self, outcome):
+        path, result = outcome
+        if isinstance(result, Exception):
+            self.status.value = "not opened"
+            notify_error(f"Open a light field: {result}")
+            return
+        layer = add_layer(self.viewer, result, replace=False)
+        shape = " x ".join(str(n) for n in layer.data.shape)
+        self.status.value = f"opened {path.name}: {shape}"
+        notify_info(f"opened {path.name} as {layer.name!r} ({shape})")
+
+    def _on_finished(self, *_):
+        self.worker = None
+        self.open_button.enabled = True
+
+
+def _read(path: Path, options: dict):
+    """Read in the worker; an error is returned, not raised (it becomes a notification)."""
+    try:
+        return path, read_lightfield_layer(path, **options)[0]
+    except Exception as exc:  # noqa: BLE001 - reported to the user in one line
+        return path, exc
