@@ -49,9 +49,9 @@ class Identity:
 def noise_sigma(g: torch.Tensor) -> float:
     """Robust estimate of the noise standard deviation of (V, U, Y, X, C).
 
-    :func:`~napari_lfdeblur.deconvolution.estimate_noise_sigma` (the median
-    absolute finest diagonal Haar detail of every view, over 0.6745), the
-    estimate the non-blind weight rule uses too.
+    :func:`~napari_lfdeblur.deconvolution.estimate_noise_sigma` (from the
+    least detailed blocks of the finest diagonal Haar detail of every view),
+    the estimate the non-blind weight rule uses too.
     """
     return estimate_noise_sigma(g.detach().cpu().numpy())
 
