@@ -454,7 +454,7 @@ METHOD_TEXT = """\
   behind the default TV weight (`napari_lfdeblur.deconvolution.estimate_noise_sigma`) to the sharp
   light field itself: it measures the finest-scale detail there, which is sensor noise in a real
   capture (a real capture is its own ground truth, noise included) and fine texture in a rendered
-  scene (the captures are stored with 8 bits, so on them it moves in steps of about 0.003). Where
+  scene. Where
   it exceeds the added noise, a restoration that smooths at that scale (the TV prior
   does) moves away from the reference, so even `truepath` can score below the input on cases with
   little blur: the PSNR then counts the detail removed as well as the blur undone.

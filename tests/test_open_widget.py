@@ -41,8 +41,8 @@ def test_opens_the_central_views_only(make_napari_viewer, qtbot, tmp_path, lf, n
     w.source.value = path
     assert w.status.value == "layout: h5"
     w.views_v.value, w.views_u.value = 3, 5
-    _open(qtbot, w)
-    (layer,) = viewer.layers
+    layer = w.open_and_wait()
+    assert list(viewer.layers) == [layer]
     assert layer.name == "scene" and layer.rgb
     np.testing.assert_array_equal(layer.data, read_lightfield(path)[2:5, 0:5])
     assert layer.metadata["angular_crop"] == [3, 5]
@@ -106,7 +106,7 @@ def test_a_file_that_is_not_a_light_field(make_napari_viewer, qtbot, tmp_path, n
     viewer, w = _widget(make_napari_viewer)
     w.source.value = path
     assert "not recognised" in w.status.value
-    _open(qtbot, w)
+    assert w.open_and_wait() is None
     assert len(viewer.layers) == 0
     ((kind, message),) = notifications
     assert kind == "error" and "notes.npy" in message

@@ -13,6 +13,7 @@ error notification, and no layer is added or replaced.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, Label, PushButton
@@ -37,12 +38,14 @@ class OpenLightFieldWidget(Container):
     ticked), ``views_v`` and ``views_u`` (central views kept, 0 for all),
     ``layout`` (``'auto'`` or one of :data:`napari_lfdeblur.io.LAYOUTS`),
     *Open* and a status line. The new layer is added beside any layer of the
-    same name (napari makes the name unique); nothing is replaced.
+    same name (napari makes the name unique); nothing is replaced. From a
+    script, :meth:`open_and_wait` returns the new layer.
     """
 
     def __init__(self, napari_viewer):
         self.viewer = napari_viewer
         self.worker = None
+        self.last_layer = None
         self.source = FileEdit(name="source", label="file", mode="r",
                                tooltip="a light-field file (.mat, .h5, .npy, .npz, .tif, .eslf.png)")
         self.folder_box = CheckBox(name="folder", text="folder of views", value=False,
@@ -121,13 +124,32 @@ class OpenLightFieldWidget(Container):
         worker.start()
         return worker
 
+    def open_and_wait(self):
+        """Open and wait for the read to end, processing Qt events (for scripts and tests).
+
+        Returns
+        -------
+        napari.layers.Image or None
+            The new layer; None when the file could not be read (a
+            notification says why).
+        """
+        from qtpy.QtWidgets import QApplication
+
+        self.last_layer = None
+        if self.open() is None:
+            return None
+        while self.worker is not None:
+            QApplication.processEvents()
+            time.sleep(0.005)
+        return self.last_layer
+
     def _on_returned(self, outcome):
         path, result = outcome
         if isinstance(result, Exception):
             self.status.value = "not opened"
             notify_error(f"Open a light field: {result}")
             return
-        layer = add_layer(self.viewer, result, replace=False)
+        layer = self.last_layer = add_layer(self.viewer, result, replace=False)
         shape = " x ".join(str(n) for n in layer.data.shape)
         self.status.value = f"opened {path.name}: {shape}"
         notify_info(f"opened {path.name} as {layer.name!r} ({shape})")
