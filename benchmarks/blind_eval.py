@@ -4,7 +4,7 @@ The cases (``benchmarks/eval_set.py``): rendered scenes of natural textures at r
 (``procedural_scene``), crops of a Lytro F01 capture (one plane) and of a Lytro Illum capture
 (depth range), at infinity disparities ``d_inf`` in {0, ±0.5, ±1, 2}, blurred by hidden paths
 from none through barely there (0.3 view) to 4 views, most with ``p_z != 0``, noise sigma 0.002
-or 0.01. ``dev`` is for development; ``test`` is run once, after the method is frozen
+or 0.01. ``dev`` is for development; ``test`` is run after the method is frozen
 (``--frozen`` says so in the table).
 
 Methods
@@ -415,7 +415,7 @@ def split_line(split: str, frozen: bool) -> str:
         return ("**Development split** (`dev`): the cases a method may be developed and tuned on. "
                 "The held-out figures are those of the test split.")
     if frozen:
-        return ("**Test split** (`test`), run once, after the method was frozen: no parameter was chosen "
+        return ("**Test split** (`test`), run after the method was frozen: no parameter was chosen "
                 "on these cases.")
     return ("**Test split** (`test`), **not marked frozen** (no `--frozen`): these figures are not the "
             "held-out report.")

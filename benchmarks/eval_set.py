@@ -19,7 +19,7 @@ to the zero-mean gauge for ``T = 128``, so the ground truth is the sharp light f
 
 Splits
 ------
-``dev`` (18 cases) is for development and tuning; ``test`` (24 cases) is run once, after the
+``dev`` (18 cases) is for development and tuning; ``test`` (24 cases) is run after the
 method is frozen. Each split covers every group, every ``d_inf`` of ``D_INF`` and both noise
 levels; each group has cases at ``d_inf = 0`` and ``!= 0`` and at both noise levels; each split has
 one case with no blur and two barely blurred ones ("do no harm"). The two splits share no scene
