@@ -109,7 +109,7 @@ def test_partial_report_is_marked_and_says_the_split(blind_eval, tmp_path):
     assert "not marked frozen" in text
     args.frozen = True
     blind_eval.write(rows, [], specs, {}, args, env, out, final=False, n_done=1, n_all=6)
-    assert "run once, after the method was frozen" in out.read_text()
+    assert "run after the method was frozen" in out.read_text()
     assert blind_eval.table_for("test").name == "blind_eval_test.md"
 
 
