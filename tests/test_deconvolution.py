@@ -313,6 +313,11 @@ def test_noise_estimate_is_unbiased_on_noise_and_reads_the_least_detailed_blocks
     clipped[:, :, :40] = 1.0
     assert estimate_noise_sigma(clipped) == pytest.approx(estimate_noise_sigma(noisy[:, :, 40:]), rel=0.15)
     assert estimate_noise_sigma(np.ones((3, 3, 16, 16), np.float32)) == 0.0
+    # noise that grows with brightness (photon noise) on a smooth ramp: the root-mean-square noise, not the darkest
+    ramp = np.broadcast_to(np.linspace(0.05, 0.95, 64, dtype=np.float32), (5, 5, 64, 64))
+    var = 2e-4 * ramp
+    photon = ramp + rng.normal(size=ramp.shape).astype(np.float32) * np.sqrt(var)
+    assert estimate_noise_sigma(photon) == pytest.approx(np.sqrt(var.mean()), rel=0.1)
     # integer-coded images: the rounding (a uniform error of one code step) counts as noise
     for steps in (1.0, 3.0):
         coded = np.round(rng.normal(128, steps, (5, 5, 32, 32))) / 255

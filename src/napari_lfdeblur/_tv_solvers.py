@@ -176,6 +176,8 @@ def _objective(x, Kx, f, weight, isotropic, axis_weights, kbuf, scratch):
 _NOISE_BLOCK, _NOISE_KEPT = 4, 12
 #: the share of blocks, the least detailed ones, that :func:`estimate_noise_sigma` reads the noise from
 _NOISE_QUANTILE = 0.1
+#: brightness classes of :func:`estimate_noise_sigma`, each an equal share of the blocks
+_NOISE_BINS = 4
 #: the 10th percentile of the mean of the 12 smallest of 16 squared standard Gaussians
 #: (simulated: 16 million blocks, 8 seeds, standard error 4e-5)
 _NOISE_UNIT = 0.19817
@@ -192,9 +194,15 @@ def estimate_noise_sigma(lf: np.ndarray) -> float:
     - ``HH`` is cut into blocks of 4 x 4 coefficients (8 x 8 pixels); each
       block is summarised by the mean of its 12 smallest squared
       coefficients, which up to 4 edge coefficients in the block do not move;
-    - the estimate is the square root of the 10th percentile of those block
-      means, over the same percentile for pure Gaussian noise of unit
-      standard deviation, so that pure noise comes out without bias;
+    - the blocks are sorted by brightness (their mean pixel value) into 4
+      classes of equal size; in each class the noise variance is the 10th
+      percentile of the block means, over the same percentile for pure
+      Gaussian noise of unit standard deviation, so that pure noise comes
+      out without bias;
+    - the estimate is the square root of the mean of the 4 variances: the
+      root-mean-square noise of the light field, also where the noise grows
+      with brightness (photon noise), where the least detailed blocks of
+      the whole light field would often be the darkest and read too little;
     - blocks without any detail (a clipped or constant region) say nothing
       about the noise and are left out.
 
@@ -234,16 +242,21 @@ def estimate_noise_sigma(lf: np.ndarray) -> float:
         views = a[:, :, :Y, :X].reshape(-1, Y, X, a.shape[4])
         return float(np.median(np.abs(_haar_hh(views)))) / 0.6744897501960817
     U, C = a.shape[1], a.shape[4]
-    means = []
+    means, brightness = [], []
     for row in a:  # one row of views at a time: the temporaries stay small
-        hh = _haar_hh(row[:, : 2 * b * Yb, : 2 * b * Xb])
-        sq = np.square(hh.reshape(U, Yb, b, Xb, b, C).transpose(0, 1, 3, 5, 2, 4).reshape(-1, b * b))
-        sq = sq[sq.max(axis=1) > 0]  # a block without any detail (clipped, constant) says nothing of the noise
-        means.append(np.partition(sq, _NOISE_KEPT - 1, axis=1)[:, :_NOISE_KEPT].mean(axis=1, dtype=np.float64))
-    means = np.concatenate(means)
+        r = row[:, : 2 * b * Yb, : 2 * b * Xb]
+        sq = np.square(_haar_hh(r).reshape(U, Yb, b, Xb, b, C).transpose(0, 1, 3, 5, 2, 4).reshape(-1, b * b))
+        level = r.reshape(U, Yb, 2 * b, Xb, 2 * b, C).mean(axis=(2, 4)).reshape(-1)  # in the order of sq's blocks
+        keep = sq.max(axis=1) > 0  # a block without any detail (clipped, constant) says nothing of the noise
+        means.append(np.partition(sq[keep], _NOISE_KEPT - 1, axis=1)[:, :_NOISE_KEPT].mean(axis=1, dtype=np.float64))
+        brightness.append(level[keep])
+    means, brightness = np.concatenate(means), np.concatenate(brightness)
     if means.size == 0:
         return 0.0
-    return float(np.sqrt(np.quantile(means, _NOISE_QUANTILE) / _NOISE_UNIT))
+    n_bins = max(1, min(_NOISE_BINS, means.size // 100))
+    bins = np.array_split(np.argsort(brightness, kind="stable"), n_bins)  # equal shares of the blocks
+    variance = np.mean([np.quantile(means[i], _NOISE_QUANTILE) for i in bins]) / _NOISE_UNIT
+    return float(np.sqrt(variance))
 
 
 def _haar_hh(a: np.ndarray) -> np.ndarray:
