@@ -2,11 +2,12 @@
 
 Usage::
 
-    python benchmarks/dev/blind_dev.py [--cases syn-p1,lytro-p2] [--set key=value ...] [--oracle]
+    python benchmarks/dev/blind_dev.py [--cases dev01,dev09] [--set key=value ...] [--oracle]
         [--device cpu] [--preset default]
 
-Prints, per case: PSNR of blurred / restored (8 px borders cropped), blur mismatch,
-Chamfer distance, time; with ``--oracle`` also the non-blind restoration with the true path.
+Prints, per case of blind_eval.py's development split: PSNR of blurred / restored (8 px borders
+cropped), blur mismatch, Chamfer distance, the evidence test's verdict, time; with ``--oracle``
+also the non-blind restoration with the true path.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ def _value(text):
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--cases", default="syn-p1,syn-p2,syn-p3,lytro-p1,lytro-p2,lytro-p3")
+    ap.add_argument("--cases", default="", help="development cases, comma-separated (default: all)")
     ap.add_argument("--preset", default="default")
     ap.add_argument("--set", nargs="*", default=[])
     ap.add_argument("--device", default="cpu")
@@ -65,34 +66,36 @@ def main(argv=None):
             (changes.setdefault(stage, {}) if stage else changes)[name] = _value(v)
         params = params.replace(**changes)
     rows = []
-    names = ["big"] if args.big else args.cases.split(",")
-    for name in names:
-        if name == "big":
-            from napari_lfdeblur import random_path, simulate_blur, synthetic_scene
-            from napari_lfdeblur.path import center_path
+    if args.big:
+        from napari_lfdeblur import random_path, simulate_blur, synthetic_scene
+        from napari_lfdeblur.path import center_path
 
-            sharp, _ = synthetic_scene(shape=(9, 9, 376, 541), n_layers=3, color=True, seed=1)
-            cp = center_path(random_path(4, extent=3.0, z_extent=0.0, seed=102), 128)
-            blurred = simulate_blur(sharp, cp, n_times=64, device=args.device)
-            blurred = np.clip(blurred + np.random.default_rng(0).normal(0, 0.002, blurred.shape), 0, 1)
-            case = ev.Case("big", "syn", sharp, blurred.astype(np.float32), cp)
-        else:
-            case = ev.make_case(name)
+        sharp, _ = synthetic_scene(shape=(9, 9, 376, 541), n_layers=3, color=True, seed=1)
+        cp = center_path(random_path(4, extent=3.0, z_extent=0.0, seed=102), 128)
+        blurred = simulate_blur(sharp, cp, n_times=64, device=args.device)
+        blurred = np.clip(blurred + np.random.default_rng(0).normal(0, 0.002, blurred.shape), 0, 1)
+        cases = [("big", sharp, blurred.astype(np.float32), cp, 0.0)]
+    else:
+        specs, _ = ev.select_cases("dev", args.cases.split(",") if args.cases else None)
+        cases = ((s.name, c.sharp, c.blurred, c.control_points, c.infinity_disparity)
+                 for s, c in ((s, ev.make_case(s)) for s in specs))
+    for name, sharp, blurred, cp, d in cases:
         t = time.perf_counter()
-        res = blind_deblur(case.blurred, params=params, device=args.device, seed=args.seed)
+        res = blind_deblur(blurred, infinity_disparity=d, params=params, device=args.device, seed=args.seed)
         dt = time.perf_counter() - t
-        pe = path_error(res.control_points, case.control_points, lightfield=case.sharp)
-        p0 = psnr(case.blurred, case.sharp, crop=ev.CROP)
-        p1 = psnr(res.lightfield, case.sharp, crop=ev.CROP)
+        pe = path_error(res.control_points, cp, lightfield=sharp, infinity_disparity=d)
+        p0 = psnr(blurred, sharp, crop=ev.CROP)
+        p1 = psnr(res.lightfield, sharp, crop=ev.CROP)
         line = (f"{name:9s} blurred {p0:6.2f}  restored {p1:6.2f}  gain {p1 - p0:+6.2f}  "
                 f"mismatch {pe.blur_mismatch:5.3f}  chamfer {pe.chamfer:5.3f} (extent {pe.extent:4.2f})  "
-                f"time {dt:5.1f}s (path {res.timings['path']:.1f}s)")
+                f"blur found {res.info.get('blur_found')}  time {dt:5.1f}s (path {res.timings['path']:.1f}s)")
         if args.oracle:
             from napari_lfdeblur.deconvolution import deconvolve
+            from napari_lfdeblur.path import center_path
 
-            o = deconvolve(case.blurred, case.control_points, n_times=params.final_n_times, method="tv",
-                           weight=params.tv_weight, n_iter=params.tv_iter, tol=0.0, device=args.device)
-            line += f"  oracle {psnr(o, case.sharp, crop=ev.CROP) - p0:+6.2f}"
+            o = deconvolve(blurred, center_path(cp, params.final_n_times), n_times=params.final_n_times,
+                           infinity_disparity=d, params=params.final, device=args.device)
+            line += f"  oracle {psnr(o, sharp, crop=ev.CROP) - p0:+6.2f}"
         print(line, flush=True)
         rows.append((p1 - p0, pe.blur_mismatch, dt))
     a = np.array(rows)
