@@ -57,6 +57,7 @@ def main(argv=None):
     ev = _eval_module()
     from napari_lfdeblur.blind import BlindParams, blind_deblur
     from napari_lfdeblur.metrics import path_error, psnr
+    from napari_lfdeblur.path import center_path
 
     params = BlindParams.preset(args.preset)
     if args.set:
@@ -68,7 +69,6 @@ def main(argv=None):
     rows = []
     if args.big:
         from napari_lfdeblur import random_path, simulate_blur, synthetic_scene
-        from napari_lfdeblur.path import center_path
 
         sharp, _ = synthetic_scene(shape=(9, 9, 376, 541), n_layers=3, color=True, seed=1)
         cp = center_path(random_path(4, extent=3.0, z_extent=0.0, seed=102), 128)
@@ -77,8 +77,8 @@ def main(argv=None):
         cases = [("big", sharp, blurred.astype(np.float32), cp, 0.0)]
     else:
         specs, _ = ev.select_cases("dev", args.cases.split(",") if args.cases else None)
-        cases = ((s.name, c.sharp, c.blurred, c.control_points, c.infinity_disparity)
-                 for s, c in ((s, ev.make_case(s)) for s in specs))
+        cases = ((c.name, c.sharp, c.blurred, c.control_points, c.infinity_disparity)
+                 for c in map(ev.make_case, specs))
     for name, sharp, blurred, cp, d in cases:
         t = time.perf_counter()
         res = blind_deblur(blurred, infinity_disparity=d, params=params, device=args.device, seed=args.seed)
@@ -91,7 +91,6 @@ def main(argv=None):
                 f"blur found {res.info.get('blur_found')}  time {dt:5.1f}s (path {res.timings['path']:.1f}s)")
         if args.oracle:
             from napari_lfdeblur.deconvolution import deconvolve
-            from napari_lfdeblur.path import center_path
 
             o = deconvolve(blurred, center_path(cp, params.final_n_times), n_times=params.final_n_times,
                            infinity_disparity=d, params=params.final, device=args.device)

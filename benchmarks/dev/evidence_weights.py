@@ -29,7 +29,6 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -46,21 +45,22 @@ def main(argv=None):
 
     from napari_lfdeblur.blind import BlindParams, blind_deblur
     from napari_lfdeblur.blind._disparity import gray, shear
-    from napari_lfdeblur.blind._evidence import EVIDENCE_MARGIN, RELATIVE_MARGIN, blur_evidence
+    from napari_lfdeblur.blind._evidence import EVIDENCE_MARGIN, RELATIVE_MARGIN, blur_evidence, evidence_weight
     from napari_lfdeblur.metrics import path_error, psnr
     from napari_lfdeblur.path import center_path
     from napari_lfdeblur.progress import run_to_completion
 
     p = BlindParams.preset("default").replace(require_evidence=False)
-    own = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
+    own = evidence_weight(p)
     weights = [own] + [float(w) for w in args.weights.split(",") if w]
     print(f"evidence test: gain > {EVIDENCE_MARGIN:g} noise variances per sample and relative > "
           f"{RELATIVE_MARGIN:g}; its own weight is {own:g}")
     print("case | group | noise | estimate's mismatch | gain dB restored anyway | weight | "
           "true path: gain, relative | estimate: gain, relative")
-    for name in args.cases.split(","):
-        specs, _ = ev.select_cases("dev", [name])
-        case = ev.make_case(specs[0])
+    specs, _ = ev.select_cases("dev", args.cases.split(","))
+    for spec in specs:
+        case = ev.make_case(spec)
+        name = spec.name
         d = case.infinity_disparity
         res = blind_deblur(case.blurred, infinity_disparity=d, params=p, seed=0)
         mismatch = path_error(res.control_points, case.control_points, lightfield=case.sharp,

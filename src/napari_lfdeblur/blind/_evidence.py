@@ -25,8 +25,8 @@ from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
 from ._latent import difference_pair, l0_latent
 from ._params import BlindParams
 
-__all__ = ["noise_sigma", "blur_reach", "blur_evidence", "evidence_message", "Identity", "EVIDENCE_MARGIN",
-           "RELATIVE_MARGIN", "MIN_REACH"]
+__all__ = ["noise_sigma", "blur_reach", "evidence_weight", "blur_evidence", "evidence_message", "Identity",
+           "EVIDENCE_MARGIN", "RELATIVE_MARGIN", "MIN_REACH"]
 
 #: the blur model must lower the salient-edge objective by more than this many noise variances per sample
 EVIDENCE_MARGIN = 1.0
@@ -85,6 +85,11 @@ def blur_reach(cp, n_times: int, g: torch.Tensor, frame=None) -> float:
     return reach
 
 
+def evidence_weight(p: BlindParams) -> float:
+    """The latent weight ``lambda`` of the evidence test: the smallest of the alternation."""
+    return p.latent.l0_weight * min(1.0, p.latent.l0_floor)
+
+
 def evidence_message(evidence: dict, required: bool = True) -> str:
     """A one-line description of the evidence for the blur, for people.
 
@@ -140,7 +145,7 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device, frame=None):
     ``blur_found`` (bool).
     """
     sigma = max(noise_sigma(g), 1e-4)
-    lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
+    lam = evidence_weight(p)
     op = BlurOperator(tuple(g.shape), cp, n_times=p.n_times, infinity_disparity=0.0, device=device, frame=frame)
     m_blur, e_blur = yield from _objective(op, g, lam, p)
     m_none, e_none = yield from _objective(Identity(), g, lam, p)
