@@ -1,11 +1,14 @@
 """The default TV weight: how good is ``NOISE_WEIGHT_FACTOR * estimated sigma``?
 
 ``deconvolve(method='tv')`` with ``weight=None`` uses ``w = NOISE_WEIGHT_FACTOR
-* sigma``, ``sigma`` from ``estimate_noise_sigma`` on the blurred input. This
-script checks the rule on cases of its own, not the evaluation set of
-``blind_eval.py``: the package's ``synthetic_scene`` (two seeds), blurred by
-random paths with ``p_z != 0`` at ``d_inf`` 0 and 1, with Gaussian noise
-0.002, 0.01 and 0.02. For each case it reports
+* sigma``, ``sigma`` from ``estimate_noise_sigma`` on the blurred input, for
+both priors: every channel with its own TV, and the colour TV
+(``couple_channels``). This script checks the rule on cases of its own, not
+the evaluation set of ``blind_eval.py``: the package's ``synthetic_scene``
+(piecewise-constant textures, random colours) and ``procedural_scene``
+(natural textures), two seeds each, blurred by random paths with ``p_z !=
+0`` at ``d_inf`` 0 and 1, with Gaussian noise 0.002, 0.01 and 0.02. For each
+case and prior it reports
 
 - the noise estimate against the noise added (the scene's own fine detail
   makes it err high);
@@ -28,8 +31,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from napari_lfdeblur import deconvolve, simulate_blur, synthetic_scene
-from napari_lfdeblur.deconvolution import NOISE_WEIGHT_FACTOR, estimate_noise_sigma
+from napari_lfdeblur import deconvolve, procedural_scene, simulate_blur, synthetic_scene
+from napari_lfdeblur.deconvolution import COLOUR_WEIGHT_FACTOR, NOISE_WEIGHT_FACTOR, estimate_noise_sigma
 from napari_lfdeblur.metrics import psnr
 from napari_lfdeblur.path import center_path, random_path
 
@@ -38,25 +41,39 @@ import _report  # noqa: E402  (benchmarks/_report.py)
 
 FACTORS = (0.1, 0.15, 0.2, 0.3, 0.45, 0.7)
 NOISES = (0.002, 0.01, 0.02)
-SEEDS = (0, 1)
+SCENES = (("synthetic", 0), ("synthetic", 1), ("procedural", 0), ("procedural", 1))
+#: the priors: every channel with its own TV, and the colour TV (``couple_channels``)
+PRIORS = {"separate": False, "colour": True}
+#: the default rule's factor of each prior
+RULES = {"separate": NOISE_WEIGHT_FACTOR, "colour": COLOUR_WEIGHT_FACTOR}
 D_INFS = (0.0, 1.0)
 N_TIMES = 16
 CROP = 4
 
 
-def run_case(shape, seed, d_inf, noise, factors):
-    """One case: the noise estimate and the PSNR gain at each factor."""
-    lf, _ = synthetic_scene(shape, color=True, seed=seed)
+def make_case(shape, scene, d_inf, noise):
+    """One case: the sharp light field, the true path and the blurred, noisy input."""
+    kind, seed = scene
+    if kind == "synthetic":
+        lf, _ = synthetic_scene(shape, color=True, seed=seed)
+    else:
+        lf, _ = procedural_scene(shape, seed=seed)
     cp = center_path(random_path(3, extent=2.0, z_extent=1.0, seed=seed + 10), N_TIMES)
     blurred = simulate_blur(lf, cp, n_times=N_TIMES, infinity_disparity=d_inf)
     blurred = blurred + np.random.default_rng(seed).normal(0, noise, lf.shape).astype(np.float32)
+    return lf, cp, blurred
+
+
+def run_case(lf, cp, blurred, d_inf, factors, coupled):
+    """The PSNR gain over the input at each factor, with one prior."""
     sigma = estimate_noise_sigma(blurred)
     base = psnr(blurred, lf, crop=CROP)
     gains = []
     for f in factors:
-        out = deconvolve(blurred, cp, n_times=N_TIMES, infinity_disparity=d_inf, weight=f * sigma)
+        out = deconvolve(blurred, cp, n_times=N_TIMES, infinity_disparity=d_inf, weight=f * sigma,
+                         couple_channels=coupled)
         gains.append(psnr(out, lf, crop=CROP) - base)
-    return sigma, gains
+    return gains
 
 
 def main(argv=None) -> None:
@@ -65,36 +82,42 @@ def main(argv=None) -> None:
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
     torch.set_num_threads(2)
-    factors = FACTORS if not args.quick else (0.15, NOISE_WEIGHT_FACTOR)
-    if NOISE_WEIGHT_FACTOR not in factors:
-        factors = tuple(sorted(factors + (NOISE_WEIGHT_FACTOR,)))
-    grid = [(s, d, n) for s in SEEDS for d in D_INFS for n in NOISES] if not args.quick else [(0, 1.0, 0.01)]
+    factors = FACTORS if not args.quick else (0.15,)
+    factors = tuple(sorted(set(factors) | set(RULES.values())))
+    grid = [(sc, d, n) for sc in SCENES for d in D_INFS for n in NOISES] if not args.quick else [(SCENES[2], 1.0, 0.01)]
     shape = (5, 5, 64, 64) if not args.quick else (3, 3, 24, 24)
-    rule = factors.index(NOISE_WEIGHT_FACTOR)
-    head = "| seed | d_inf | noise | sigma estimated | " + " | ".join(f"gain at {f} dB" for f in factors)
-    rows = [head + " | best factor | rule loses dB |", "|" + "---|" * (len(factors) + 6)]
-    by_noise = {n: [] for n in NOISES}
-    for seed, d_inf, noise in grid:
-        sigma, gains = run_case(shape, seed, d_inf, noise, factors)
-        best = int(np.argmax(gains))
-        by_noise.setdefault(noise, []).append(gains)
-        rows.append(f"| {seed} | {d_inf:+g} | {noise:g} | {sigma:.4f} ({sigma / noise:.2f}x) | "
-                    + " | ".join(f"{g:+.2f}" for g in gains)
-                    + f" | {factors[best]} | {gains[best] - gains[rule]:.2f} |")
-        print(rows[-1], flush=True)
-    summary = ["| noise | cases | " + " | ".join(f"mean gain at {f} dB" for f in factors) + " |",
-               "|" + "---|" * (len(factors) + 2)]
-    for noise, gains in by_noise.items():
-        if gains:
-            mean = np.mean(gains, axis=0)
-            summary.append(f"| {noise:g} | {len(gains)} | " + " | ".join(f"{g:+.2f}" for g in mean) + " |")
+    head = "| scene | d_inf | noise | sigma estimated | prior | " + " | ".join(f"gain at {f} dB" for f in factors)
+    rows = [head + " | best factor | rule loses dB |", "|" + "---|" * (len(factors) + 7)]
+    by_noise = {}
+    for scene, d_inf, noise in grid:
+        lf, cp, blurred = make_case(shape, scene, d_inf, noise)
+        sigma = estimate_noise_sigma(blurred)
+        for prior, coupled in PRIORS.items():
+            gains = run_case(lf, cp, blurred, d_inf, factors, coupled)
+            best, rule = int(np.argmax(gains)), factors.index(RULES[prior])
+            by_noise.setdefault((noise, prior), []).append(gains)
+            by_noise.setdefault((noise, f"{prior}, {scene[0]}"), []).append(gains)
+            rows.append(f"| {scene[0]} {scene[1]} | {d_inf:+g} | {noise:g} | {sigma:.4f} ({sigma / noise:.2f}x) | "
+                        f"{prior} | " + " | ".join(f"{g:+.2f}" for g in gains)
+                        + f" | {factors[best]} | {gains[best] - gains[rule]:.2f} |")
+            print(rows[-1], flush=True)
+    summary = ["| noise | prior, scenes | cases | " + " | ".join(f"mean gain at {f} dB" for f in factors) + " |",
+               "|" + "---|" * (len(factors) + 3)]
+    for (noise, prior), gains in sorted(by_noise.items(), key=lambda kv: (kv[0][0], kv[0][1])):
+        mean = np.mean(gains, axis=0)
+        label = prior if "," in prior else f"{prior}, all"
+        summary.append(f"| {noise:g} | {label} | {len(gains)} | " + " | ".join(f"{g:+.2f}" for g in mean) + " |")
     body = [
-        f"The package's `synthetic_scene`, {'x'.join(map(str, shape))}x3, seeds {list(SEEDS)}; random paths "
+        f"The package's `synthetic_scene` and `procedural_scene`, {'x'.join(map(str, shape))}x3, "
+        f"{', '.join(f'{k} seed {s}' for k, s in SCENES)}; random paths "
         f"of 3 control points (extent 2 views, `p_z` extent 1), T = {N_TIMES}; Gaussian noise; the non-blind "
         f"TV solve (`deconvolve`, default iterations and stopping) with the true path and the weight "
-        f"`factor * sigma`, `sigma` estimated in the blurred input (`estimate_noise_sigma`). Gains are PSNR "
-        f"over the blurred input, borders of {CROP} px left out. The default rule's factor is "
-        f"{NOISE_WEIGHT_FACTOR}. These cases are not those of `blind_eval.py`.",
+        f"`factor * sigma`, `sigma` estimated in the blurred input (`estimate_noise_sigma`), with every "
+        f"channel's own TV (`separate`) and with the colour TV (`colour`, `couple_channels=True`). Gains are "
+        f"PSNR over the blurred input, borders of {CROP} px left out. The default rule's factor is "
+        f"{NOISE_WEIGHT_FACTOR} (`NOISE_WEIGHT_FACTOR`), {COLOUR_WEIGHT_FACTOR} for the colour TV "
+        f"(`COLOUR_WEIGHT_FACTOR`); 'rule loses' is against the prior's own factor. These cases are not those "
+        f"of `blind_eval.py`.",
         "", "## Mean gain by noise level", "", *summary, "", "## Per case", "", *rows,
     ]
     out = _report.table_path(args.out, __file__, smoke=args.quick)

@@ -20,7 +20,7 @@ from napari_lfdeblur import (
 )
 from napari_lfdeblur.progress import run_to_completion, with_previews
 from napari_lfdeblur.blur import BlurOperator, from_tensor, to_tensor
-from napari_lfdeblur.deconvolution import NOISE_WEIGHT_FACTOR, estimate_noise_sigma
+from napari_lfdeblur.deconvolution import COLOUR_WEIGHT_FACTOR, NOISE_WEIGHT_FACTOR, estimate_noise_sigma
 from napari_lfdeblur.priors import divergence4d, gradient_norm_bound, project_tv_dual, tv4d
 from napari_lfdeblur.special_cases import inplane_matrix, inplane_psf
 
@@ -206,7 +206,7 @@ def test_zero_weight_tv_fits_the_data():
     assert rmse(resid, 0) < 0.1 * rmse(b, lf)
 
 
-def _condat_vu_reference(blurred, cp, n_times, d_inf, weight, n_iter):
+def _condat_vu_reference(blurred, cp, n_times, d_inf, weight, n_iter, coupled=False):
     """A long run of a different algorithm (Condat-Vu primal-dual, fixed steps) for the same objective + box."""
     import torch
 
@@ -224,34 +224,63 @@ def _condat_vu_reference(blurred, cp, n_times, d_inf, weight, n_iter):
             for a in range(4):
                 n = y.shape[a]
                 dual[a].narrow(a, 0, n - 1).add_(y.narrow(a, 1, n - 1) - y.narrow(a, 0, n - 1), alpha=sig)
-            project_tv_dual(dual, weight)
+            project_tv_dual(dual, weight, coupled_channels=coupled)
             x = x_new
         return from_tensor(x, blurred.ndim)
 
 
-def _objective(x, blurred, cp, n_times, d_inf, weight):
+def _objective(x, blurred, cp, n_times, d_inf, weight, coupled=False):
     import torch
 
     r = simulate_blur(x, cp, n_times=n_times, infinity_disparity=d_inf).astype(np.float64) - blurred
-    return 0.5 * float((r * r).sum()) + weight * float(tv4d(torch.from_numpy(np.ascontiguousarray(x)).double()))
+    tv = tv4d(torch.from_numpy(np.ascontiguousarray(x)).double(), coupled_channels=coupled)
+    return 0.5 * float((r * r).sum()) + weight * float(tv)
 
 
-@pytest.mark.parametrize("d_inf, z", [(0.0, 1.5), (1.0, 0.0)], ids=["p_z", "d_inf"])
-def test_tv_reaches_the_optimum_of_a_long_reference_run(d_inf, z):
-    lf, _ = synthetic_scene((3, 3, 16, 16), seed=9)
+@pytest.mark.parametrize("d_inf, z, coupled", [(0.0, 1.5, False), (1.0, 0.0, False), (1.0, 1.0, True)],
+                         ids=["p_z", "d_inf", "colour TV"])
+def test_tv_reaches_the_optimum_of_a_long_reference_run(d_inf, z, coupled):
+    lf, _ = synthetic_scene((3, 3, 16, 16), color=coupled, seed=9)
     cp = random_path(3, extent=2.0, z_extent=z, seed=4)
     blurred = simulate_blur(lf, cp, n_times=8, infinity_disparity=d_inf)
     blurred = np.clip(blurred + np.random.default_rng(1).normal(0, 0.01, lf.shape), 0, 1).astype(np.float32)
     w = 0.01
-    ref = _objective(_condat_vu_reference(blurred, cp, 8, d_inf, w, 1000), blurred, cp, 8, d_inf, w)
+    ref = _objective(_condat_vu_reference(blurred, cp, 8, d_inf, w, 1000, coupled), blurred, cp, 8, d_inf, w, coupled)
     records = []
     out = deconvolve(blurred, cp, n_times=8, infinity_disparity=d_inf, method="tv", weight=w, n_iter=40, tol=0.0,
-                     callback=records.append)
-    got = _objective(out, blurred, cp, 8, d_inf, w)
+                     couple_channels=coupled, callback=records.append)
+    got = _objective(out, blurred, cp, 8, d_inf, w, coupled)
     # 40 iterations come within 0.1 % of what 1000 Condat-Vu iterations reach (or below it)
     assert got < ref * (1 + 1e-3)
     assert records[-1].info["objective"] == pytest.approx(got, rel=1e-4)
     assert records[-1].info["blur_evaluations"] >= 40 and records[-1].info["weight"] == w
+
+
+def test_colour_tv_of_equal_channels_is_the_grey_tv_at_sqrt3_its_weight():
+    # three equal channels: 3/2 ||K x - f||^2 + w sqrt(3) TV(x) has the minimiser of 1/2 ||K x - f||^2 + w TV(x) / sqrt(3)
+    lf, _ = synthetic_scene((3, 3, 12, 12), seed=2)
+    cp = random_path(3, extent=1.5, z_extent=0.5, seed=3)
+    grey = simulate_blur(lf, cp, n_times=6, infinity_disparity=0.5)
+    grey = np.clip(grey + np.random.default_rng(0).normal(0, 0.01, grey.shape), 0, 1).astype(np.float32)
+    colour = np.repeat(grey[..., None], 3, axis=-1)
+    kw = dict(n_times=6, infinity_disparity=0.5, n_iter=200, tol=1e-7)
+    separate = deconvolve(grey, cp, weight=0.02, **kw)
+    coupled = deconvolve(colour, cp, weight=0.02 * np.sqrt(3), couple_channels=True, **kw)
+    for c in range(3):
+        np.testing.assert_allclose(coupled[..., c], separate, atol=1e-4)
+    # on one channel the colour TV is the plain TV: the same result, bit for bit
+    np.testing.assert_array_equal(deconvolve(grey, cp, weight=0.02, couple_channels=True, **kw), separate)
+    # the default weights: each prior's own factor times the noise estimate (the colour one only on colour)
+    est = estimate_noise_sigma(colour)
+    records = []
+    gen = iter_deconvolve(colour, cp, n_times=6, couple_channels=True)
+    records.append(next(gen))
+    gen.close()
+    assert records[0].info["weight"] == pytest.approx(COLOUR_WEIGHT_FACTOR * est)
+    assert records[0].iteration == 1 and records[0].n_iterations == DeconvolutionParams().n_iter  # one solve, not 3
+    p = DeconvolutionParams(couple_channels=True)
+    assert p.effective_weight("tv", est, 1) == pytest.approx(NOISE_WEIGHT_FACTOR * est)
+    assert DeconvolutionParams().effective_weight("tv", est, 3) == pytest.approx(NOISE_WEIGHT_FACTOR * est)
 
 
 def test_tv_stops_on_the_objective():

@@ -90,6 +90,44 @@ def test_tv_values_against_brute_force():
     assert float(tv4d(torch.ones(2, 2, 3, 3))) == 0.0
 
 
+def test_colour_tv_against_brute_force():
+    a = np.random.default_rng(5).random((2, 3, 4, 5, 3))
+    grads = [_np_forward_diff(a, ax) for ax in range(4)]
+    t = torch.from_numpy(a)
+    # the norm per sample over axes and channels (isotropic), over channels per axis (anisotropic)
+    iso = np.sqrt(sum((g**2).sum(-1) for g in grads)).sum()
+    aniso = sum(np.sqrt((g**2).sum(-1)).sum() for g in grads)
+    assert float(tv4d(t, coupled_channels=True)) == pytest.approx(iso, rel=1e-12)
+    assert float(tv4d(t, isotropic=False, coupled_channels=True)) == pytest.approx(aniso, rel=1e-12)
+    # grey (equal channels): sqrt(C) times the grey TV, where separate channels give C times
+    grey = t[..., :1].expand(-1, -1, -1, -1, 3)
+    assert float(tv4d(grey, coupled_channels=True)) == pytest.approx(np.sqrt(3) * float(tv4d(t[..., 0])), rel=1e-12)
+    with pytest.raises(ValueError, match="channel axis"):
+        tv4d(t[..., 0], coupled_channels=True)
+
+
+@pytest.mark.parametrize("isotropic", [True, False])
+def test_colour_dual_projection_is_the_dual_ball_of_colour_tv(isotropic):
+    rng = np.random.default_rng(6)
+    x = torch.from_numpy(rng.random((2, 3, 4, 5, 3)))
+    G = gradient4d(x)
+    # TV(x) = max over the dual ball of <grad x, p>, reached at the projection of t grad x for large t
+    P = project_tv_dual([g * 1e6 for g in G], 1.0, isotropic, coupled_channels=True)
+    assert sum(float((g * p).sum()) for g, p in zip(G, P)) == pytest.approx(
+        float(tv4d(x, isotropic=isotropic, coupled_channels=True)), rel=1e-9)
+    # a projection: points inside the ball stay, those outside land on its boundary along their direction
+    Q = [torch.from_numpy(rng.standard_normal((2, 2, 5, 5, 3))) for _ in range(4)]
+    orig = [q.clone() for q in Q]
+    project_tv_dual(Q, 0.5, isotropic, coupled_channels=True)
+    if isotropic:
+        on = torch.sqrt(sum((o * o).sum(-1, keepdim=True) for o in orig))
+        expected = [o * torch.clamp(0.5 / on, max=1.0) for o in orig]
+    else:
+        expected = [o * torch.clamp(0.5 / torch.sqrt((o * o).sum(-1, keepdim=True)), max=1.0) for o in orig]
+    for q, e in zip(Q, expected):
+        torch.testing.assert_close(q, e)
+
+
 def test_dual_projection_and_soft_threshold():
     rng = np.random.default_rng(4)
     P = [torch.from_numpy(rng.standard_normal((2, 2, 5, 5))) for _ in range(4)]

@@ -31,8 +31,11 @@ def add_gradient_(Y, x, alpha: float, axis_weights) -> None:
         y.add_(hi, alpha=alpha * axis_weights[axis]).sub_(lo, alpha=alpha * axis_weights[axis])
 
 
-def tv_value(x, isotropic, axis_weights, buffers=None) -> float:
+def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False) -> float:
     """``TV4(x)`` without materialising the four gradient components at once.
+
+    ``coupled``: the colour TV of :func:`~napari_lfdeblur.priors.tv4d`, the
+    norm taken over the last axis (the channels) too.
 
     ``buffers``, two tensors of ``x``'s shape, are used as scratch space
     instead of new allocations (large fresh tensors cost page faults on every
@@ -51,9 +54,13 @@ def tv_value(x, isotropic, axis_weights, buffers=None) -> float:
             diff.mul_(axis_weights[axis])
         if isotropic:
             acc.narrow(axis, 0, n - 1).addcmul_(diff, diff)
+        elif coupled:
+            total += float(diff.square_().sum(-1).sqrt_().sum())
         else:
             total += float(diff.abs_().sum())
-    return float(acc.sqrt_().sum()) if isotropic else total
+    if not isotropic:
+        return total
+    return float((acc.sum(-1) if coupled else acc).sqrt_().sum())
 
 
 class TVProx:
@@ -68,12 +75,14 @@ class TVProx:
     work happens in buffers allocated once; ``out`` receives the result.
     ``scratch``, two tensors of ``like``'s shape that the caller does not
     need during a call, hold the primal and the dual norm (their contents
-    are lost).
+    are lost). ``coupled``: the colour TV (the last axis holds channels).
     """
 
-    def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch):
+    def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch,
+                 coupled=False):
         self.n_inner = n_inner
         self.isotropic = isotropic
+        self.coupled = coupled
         self.aw = axis_weights
         self.box = box
         self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
@@ -92,7 +101,7 @@ class TVProx:
         step = 1.0 / (mu * self.lip)
         for _ in range(self.n_inner):
             add_gradient_(self.p, self._primal(v, mu, self.p, self.x), step, self.aw)
-            project_tv_dual(self.p, 1.0, self.isotropic, self.norm)
+            project_tv_dual(self.p, 1.0, self.isotropic, self.norm, coupled_channels=self.coupled)
         return self._primal(v, mu, self.p, out)
 
 
@@ -103,7 +112,7 @@ def _dist2(a, b, buf) -> float:
 
 @torch.no_grad()
 def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, box, n_inner=5, lip=1.0,
-                  record=None):
+                  record=None, coupled=False):
     """FISTA iterations; yields ``record(iteration, x, info)``, returns the last ``x``.
 
     ``box`` is None or ``(lo, hi)``. ``lip`` is the first estimate of the
@@ -113,18 +122,22 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
     estimate holds. Stops after ``n_iter`` iterations or when the objective
     decreased by less than ``tol`` times its value.
 
+    ``coupled``: the TV is the colour TV over the last axis of ``f``
+    (:func:`~napari_lfdeblur.priors.tv4d` with ``coupled_channels``).
+
     The iterates live in buffers allocated once and reused: the ``x`` of a
     record is overwritten two iterations later (copy it to keep it).
     """
+    tv = (isotropic, axis_weights, coupled)
     x = x0.clone() if box is None else x0.clamp(*box)
     x_new, y, work, spare = (torch.empty_like(x) for _ in range(4))
     Kx = op.forward(x)
     Ky, kwork = Kx.clone(), torch.empty_like(Kx)
     y.copy_(x)
     # the prox's primal and dual norm live only during a call: in spare and kwork, free then
-    prox = TVProx(x, n_inner, isotropic, axis_weights, box, scratch=(spare, kwork))
+    prox = TVProx(x, n_inner, isotropic, axis_weights, box, scratch=(spare, kwork), coupled=coupled)
     scratch = (work, spare)
-    F = _objective(x, Kx, f, weight, isotropic, axis_weights, kwork, scratch)[0]
+    F = _objective(x, Kx, f, weight, tv, kwork, scratch)[0]
     t = 1.0
     restarts = evaluations = 0
     for it in range(1, n_iter + 1):
@@ -141,7 +154,7 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
                 break
             lip = 1.1 * curv
         del grad
-        F_new, data = _objective(x_new, Kx_new, f, weight, isotropic, axis_weights, kwork, scratch)
+        F_new, data = _objective(x_new, Kx_new, f, weight, tv, kwork, scratch)
         step = torch.sub(x_new, x, out=work)  # x_new - x
         # adaptive restart: momentum is dropped when the objective rose or the step turned back
         if it > 1 and (F_new > F or float(torch.vdot(torch.sub(y, x_new, out=spare).view(-1), step.view(-1))) > 0):
@@ -166,10 +179,14 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
     return x
 
 
-def _objective(x, Kx, f, weight, isotropic, axis_weights, kbuf, scratch):
-    """``(1/2 ||K x - f||^2 + w TV4(x), data term)`` from a precomputed ``K x``; ``kbuf``, ``scratch``: buffers."""
+def _objective(x, Kx, f, weight, tv, kbuf, scratch):
+    """``(1/2 ||K x - f||^2 + w TV4(x), data term)`` from a precomputed ``K x``; ``kbuf``, ``scratch``: buffers.
+
+    ``tv``: ``(isotropic, axis_weights, coupled)`` of :func:`tv_value`.
+    """
     data = 0.5 * _dist2(Kx, f, kbuf)
-    return data + (weight * tv_value(x, isotropic, axis_weights, scratch) if weight > 0 else 0.0), data
+    isotropic, axis_weights, coupled = tv
+    return data + (weight * tv_value(x, isotropic, axis_weights, scratch, coupled) if weight > 0 else 0.0), data
 
 
 #: blocks of :func:`estimate_noise_sigma`: 4 x 4 Haar coefficients (8 x 8 pixels), of which the 12 smallest are kept

@@ -76,6 +76,9 @@ METHODS = ("auto", "tv", "inplane")
 INPLANE_WEIGHT = 2e-3
 #: ``'tv'``'s default weight is this factor times the noise level estimated in the data
 NOISE_WEIGHT_FACTOR = 0.3
+#: the factor of the colour TV (``couple_channels`` on more than one channel); near ``sqrt(3)`` times
+#: NOISE_WEIGHT_FACTOR, as the colour TV of grey edges is ``sqrt(3)`` times smaller than three separate TVs
+COLOUR_WEIGHT_FACTOR = 0.45
 #: inner (dual) iterations of the TV proximal map per outer iteration
 N_INNER = 5
 
@@ -96,8 +99,8 @@ class DeconvolutionParams(JsonParams):
         Regularisation weight >= 0. For ``'tv'`` it multiplies the 4D TV;
         None (the default) sets it from the data: ``NOISE_WEIGHT_FACTOR *
         sigma`` with ``sigma`` from :func:`estimate_noise_sigma` (the
-        optimal TV weight of the least-squares objective grows in proportion
-        to the noise level). For ``'inplane'`` it multiplies the squared
+        optimal TV weight of the least-squares objective grows with the
+        noise level), ``COLOUR_WEIGHT_FACTOR * sigma`` for the colour TV. For ``'inplane'`` it multiplies the squared
         angular gradient (Tikhonov; None: 2e-3), and 0 gives the exact
         (pseudo-)inverse.
     n_iter : int
@@ -109,6 +112,12 @@ class DeconvolutionParams(JsonParams):
         Isotropic (True) or anisotropic 4D TV.
     axis_weights : tuple of 4 floats
         Weights of the ``(v, u, y, x)`` differences in the TV.
+    couple_channels : bool
+        ``'tv'`` on a colour light field: one colour TV over all channels
+        (the norm per sample taken over the channels too, see
+        :func:`~napari_lfdeblur.priors.tv4d`), solved for all channels at
+        once; False solves every channel on its own with its own TV, in a
+        third of the memory.
     clip : bool
         Constrain the estimate to [0, 1] when the input lies in [0, 1].
     """
@@ -119,6 +128,7 @@ class DeconvolutionParams(JsonParams):
     tol: float = 1e-4
     isotropic: bool = True
     axis_weights: tuple = (1.0, 1.0, 1.0, 1.0)
+    couple_channels: bool = False
     clip: bool = True
 
     _what = "deconvolution"
@@ -144,9 +154,10 @@ class DeconvolutionParams(JsonParams):
             raise ValueError(f"axis_weights must be 4 non-negative numbers (v, u, y, x); got {self.axis_weights!r}")
         object.__setattr__(self, "axis_weights", aw)
         object.__setattr__(self, "isotropic", bool(self.isotropic))
+        object.__setattr__(self, "couple_channels", bool(self.couple_channels))
         object.__setattr__(self, "clip", bool(self.clip))
 
-    def effective_weight(self, method: str, sigma: float | None = None) -> float:
+    def effective_weight(self, method: str, sigma: float | None = None, n_channels: int = 1) -> float:
         """The weight used by ``method``.
 
         Parameters
@@ -155,12 +166,17 @@ class DeconvolutionParams(JsonParams):
         sigma : float, optional
             The noise level of the data (:func:`estimate_noise_sigma`); needed
             by ``'tv'`` when ``weight`` is None.
+        n_channels : int, default 1
+            Channels of the light field: the colour TV's rule applies to
+            more than one (on one channel it is the plain TV).
 
         Returns
         -------
         float
             ``weight`` when set; otherwise ``INPLANE_WEIGHT`` for ``'inplane'``
-            and ``NOISE_WEIGHT_FACTOR * sigma`` for ``'tv'`` (and ``'auto'``).
+            and, for ``'tv'`` (and ``'auto'``), ``COLOUR_WEIGHT_FACTOR * sigma``
+            with ``couple_channels`` on more than one channel, else
+            ``NOISE_WEIGHT_FACTOR * sigma``.
         """
         if self.weight is not None:
             return self.weight
@@ -168,7 +184,8 @@ class DeconvolutionParams(JsonParams):
             return INPLANE_WEIGHT
         if sigma is None:
             raise ValueError("the noise rule of the 'tv' weight needs sigma (see estimate_noise_sigma)")
-        return NOISE_WEIGHT_FACTOR * float(sigma)
+        colour = self.couple_channels and n_channels > 1
+        return (COLOUR_WEIGHT_FACTOR if colour else NOISE_WEIGHT_FACTOR) * float(sigma)
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -193,38 +210,44 @@ def _make_params(params, overrides) -> DeconvolutionParams:
 # ----------------------------------------------------------------- TV
 
 
+def _channel_groups(params: DeconvolutionParams, C: int) -> list[slice]:
+    """The channels solved together: all at once (``couple_channels``), else one by one."""
+    return [slice(0, C)] if params.couple_channels else [slice(c, c + 1) for c in range(C)]
+
+
 def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: DeconvolutionParams, weight, sigma,
              out: np.ndarray):
     """FISTA with a warm-started TV prox for ``1/2 ||K x - f||^2 + w TV4(x)`` (+ box); yields Progress.
 
-    The channels are independent (the TV does not couple them), so they are
-    solved one after the other with one single-channel operator ``op``: the
-    solver's buffers then hold one channel, not all. ``f``, ``x0``: (V, U,
-    Y, X, C); each channel's result is written into ``out`` (the input's
-    numpy shape), which is returned.
+    Without ``couple_channels`` the channels are independent, so they are
+    solved one after the other: the solver's buffers then hold one channel,
+    not all. ``op`` is the operator of one group of :func:`_channel_groups`.
+    ``f``, ``x0``: (V, U, Y, X, C); each group's result is written into
+    ``out`` (the input's numpy shape), which is returned.
     """
     box = None
     if params.clip and float(f.min()) >= 0.0 and float(f.max()) <= 1.0:
         box = (0.0, 1.0)
     C = f.shape[-1]
     view = out if out.ndim == 5 else out[..., None]
-    for c in range(C):
-        def record(it, x, info, c=c):
+    groups = _channel_groups(params, C)
+    for g, cs in enumerate(groups):
+        def record(it, x, info, cs=cs, g=g):
             def estimate():
                 full = out.copy()
-                (full if full.ndim == 5 else full[..., None])[..., c] = from_tensor(x, 4)
+                (full if full.ndim == 5 else full[..., None])[..., cs] = from_tensor(x, 5)
                 return full
 
-            return Progress(stage="tv", iteration=c * params.n_iter + it, n_iterations=C * params.n_iter,
+            return Progress(stage="tv", iteration=g * params.n_iter + it, n_iterations=len(groups) * params.n_iter,
                             loss=info["objective"], estimate=estimate,
-                            info={**info, "weight": weight, "sigma": sigma, "channel": c, "n_channels": C})
+                            info={**info, "weight": weight, "sigma": sigma, "channel": cs.start, "n_channels": C})
 
-        fc = f[..., c : c + 1].contiguous()
-        x0c = fc if x0 is f else x0[..., c : c + 1].contiguous()  # the start is the data unless given
+        fc = f[..., cs].contiguous()
+        x0c = fc if x0 is f else x0[..., cs].contiguous()  # the start is the data unless given
         x = yield from iter_fista_tv(op, fc, x0c, weight=weight, n_iter=params.n_iter, tol=params.tol,
                                      isotropic=params.isotropic, axis_weights=params.axis_weights, box=box,
-                                     n_inner=N_INNER, record=record)
-        view[..., c] = from_tensor(x, 4)
+                                     n_inner=N_INNER, record=record, coupled=params.couple_channels)
+        view[..., cs] = from_tensor(x, 5)
         del x
     return out
 
@@ -294,7 +317,7 @@ def iter_deconvolve(
 
 def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
     sigma = estimate_noise_sigma(arr) if method == "tv" else None
-    weight = p.effective_weight(method, sigma)
+    weight = p.effective_weight(method, sigma, arr.shape[4] if arr.ndim == 5 else 1)
     f = to_tensor(arr, device=dev)
     if method == "inplane":
         M = inplane_matrix(cp, arr.shape[0], arr.shape[1], n_times=n_times)
@@ -304,7 +327,9 @@ def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
         yield Progress(stage="inplane", iteration=1, n_iterations=1, info={"weight": weight, "method": method},
                        estimate=out.copy)
         return out
-    op = BlurOperator((*f.shape[:4], 1), cp, n_times=n_times, infinity_disparity=d_inf, device=dev, frame=frame)
+    width = _channel_groups(p, f.shape[-1])[0]
+    op = BlurOperator((*f.shape[:4], width.stop - width.start), cp, n_times=n_times, infinity_disparity=d_inf,
+                      device=dev, frame=frame)
     x0 = f if init is None else to_tensor(init, device=dev)
     return (yield from _iter_tv(op, f, x0, p, weight, sigma, np.empty(arr.shape, np.float32)))
 
@@ -338,7 +363,7 @@ def deconvolve(
     params : DeconvolutionParams or dict, optional
         Solver parameters; single fields may also be given as keywords
         (``method=``, ``weight=``, ``n_iter=``, ``tol=``, ``isotropic=``,
-        ``axis_weights=``, ``clip=``) and override it.
+        ``axis_weights=``, ``couple_channels=``, ``clip=``) and override it.
     device : {'auto', 'cpu', 'cuda'}, default 'auto'
     init : ndarray, optional
         Initial estimate for ``'tv'`` (default: the blurred input).

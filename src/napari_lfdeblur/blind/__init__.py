@@ -418,7 +418,8 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
     Y, X = arr.shape[2:4]
     final = p.final
     if final.weight is None:  # one weight for the whole light field, so that tiles agree
-        final = final.replace(weight=final.effective_weight(final.method, estimate_noise_sigma(arr)))
+        n_channels = arr.shape[4] if arr.ndim == 5 else 1
+        final = final.replace(weight=final.effective_weight(final.method, estimate_noise_sigma(arr), n_channels))
     if tile is None:
         parts = [((slice(None), slice(None)), (slice(None), slice(None)))]
         out = None

@@ -36,11 +36,12 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     V, U, Y, X = shape[:4]
     C = shape[4] if len(shape) == 5 else 1
     n = V * U * Y * X
-    # the final stage solves one colour channel at a time; float32 tensors of one channel's size:
-    # the channel's data (1; it is also the start), FISTA's iterates x, x_new, y and two scratch
-    # buffers, K x, K y, K x_new, the residual and the gradient (10), the TV prox's dual field (4;
-    # its primal and dual norm use FISTA's scratch); and the result, all channels
-    final = n * 4 * (FINAL_TENSORS + C)
+    # the final stage solves one colour channel at a time (all at once with the colour TV); float32
+    # tensors of one group's size: the group's data (1; it is also the start), FISTA's iterates x,
+    # x_new, y and two scratch buffers, K x, K y, K x_new, the residual and the gradient (10), the
+    # TV prox's dual field (4; its primal and dual norm use FISTA's scratch); and the result, all channels
+    group = C if p.final is not None and p.final.couple_channels else 1
+    final = n * 4 * (FINAL_TENSORS * group + C)
     r = p.path.region
     ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
     # the full-size input and its grayscale (and refocused) copies, then the window's path stage:
