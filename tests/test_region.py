@@ -177,10 +177,18 @@ def test_final_stage_progress_counts_every_channel_and_only_grows():
     sharp, _ = synthetic_scene((3, 3, 24, 24), color=True, seed=1)
     blurred = simulate_blur(sharp, [[-0.5, 0.2, 0.0], [0.5, -0.2, 0.0]], n_times=8)
     p = BlindParams().replace(n_control_points=2, n_times=8, final_n_times=8, require_evidence=False,
-                              final={"n_iter": 3, "tol": 0.0},
+                              final={"n_iter": 3, "tol": 0.0, "couple_channels": False},
                               path=dict(n_outer=1, steps=5, n_random=5, n_random_later=1, z_outer=1))
     records = []
     run_to_completion(iter_blind_deblur(blurred, params=p, device="cpu"), records.append)
     final = [r for r in records if r.stage == "final"]
     assert [r.iteration for r in final] == list(range(1, 10)) and {r.n_iterations for r in final} == {9}
     assert [r.info["channel"] for r in final] == [0, 0, 0, 1, 1, 1, 2, 2, 2]
+    fractions = [r.fraction for r in records if r.fraction is not None]
+    assert fractions == sorted(fractions)
+    # the colour TV (the default) solves the channels at once: one count
+    records = []
+    run_to_completion(iter_blind_deblur(blurred, params=p.replace(final={"couple_channels": True}), device="cpu"),
+                      records.append)
+    final = [r for r in records if r.stage == "final"]
+    assert [r.iteration for r in final] == [1, 2, 3] and {r.n_iterations for r in final} == {3}

@@ -4,20 +4,18 @@
 proximal map of ``w TV4 + box`` computed by a few warm-started
 iterations of the gradient projection on its dual (Beck & Teboulle's GP,
 Chambolle's iteration with the box inside), and adaptive momentum restart
-(O'Donoghue & Candes). :func:`estimate_noise_sigma` is the robust noise
-estimate behind the default weight.
+(O'Donoghue & Candes).
 """
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 
 from .priors import divergence4d, gradient_norm_bound, project_tv_dual
 
-__all__ = ["TVProx", "add_gradient_", "tv_value", "iter_fista_tv", "estimate_noise_sigma"]
+__all__ = ["TVProx", "add_gradient_", "tv_value", "iter_fista_tv"]
 
 
 def add_gradient_(Y, x, alpha: float, axis_weights) -> None:
@@ -187,95 +185,3 @@ def _objective(x, Kx, f, weight, tv, kbuf, scratch):
     data = 0.5 * _dist2(Kx, f, kbuf)
     isotropic, axis_weights, coupled = tv
     return data + (weight * tv_value(x, isotropic, axis_weights, scratch, coupled) if weight > 0 else 0.0), data
-
-
-#: blocks of :func:`estimate_noise_sigma`: 4 x 4 Haar coefficients (8 x 8 pixels), of which the 12 smallest are kept
-_NOISE_BLOCK, _NOISE_KEPT = 4, 12
-#: the share of blocks, the least detailed ones, that :func:`estimate_noise_sigma` reads the noise from
-_NOISE_QUANTILE = 0.1
-#: brightness classes of :func:`estimate_noise_sigma`, each an equal share of the blocks
-_NOISE_BINS = 4
-#: the 10th percentile of the mean of the 12 smallest of 16 squared standard Gaussians
-#: (simulated: 16 million blocks, 8 seeds, standard error 4e-5)
-_NOISE_UNIT = 0.19817
-
-
-def estimate_noise_sigma(lf: np.ndarray) -> float:
-    """Robust estimate of the standard deviation of white noise in a light field.
-
-    Reads the noise from the finest diagonal Haar wavelet detail ``HH`` of
-    every view and channel (Donoho & Johnstone), where white noise of standard
-    deviation ``sigma`` keeps that standard deviation, but only from its least
-    detailed parts:
-
-    - ``HH`` is cut into blocks of 4 x 4 coefficients (8 x 8 pixels); each
-      block is summarised by the mean of its 12 smallest squared
-      coefficients, which up to 4 edge coefficients in the block do not move;
-    - the blocks are sorted by brightness (their mean pixel value) into 4
-      classes of equal size; in each class the noise variance is the 10th
-      percentile of the block means, over the same percentile for pure
-      Gaussian noise of unit standard deviation, so that pure noise comes
-      out without bias;
-    - the estimate is the square root of the mean of the 4 variances: the
-      root-mean-square noise of the light field, also where the noise grows
-      with brightness (photon noise), where the least detailed blocks of
-      the whole light field would often be the darkest and read too little;
-    - blocks without any detail (a clipped or constant region) say nothing
-      about the noise and are left out.
-
-    Blur removes fine detail but not the noise added after it, so many blocks
-    of a blurred light field hold little besides noise. The median of all
-    coefficients (the classical estimate) errs high wherever the scene keeps
-    fine texture, most at low noise; the least detailed blocks remove much of
-    that bias, though a scene finely textured everywhere still makes the
-    estimate err high. On integer-coded images the rounding counts as noise
-    (about 0.29 of a code step). Views smaller than 8 x 8 pixels fall back to
-    the classical estimate, ``median(|HH|) / 0.6745``.
-
-    Parameters
-    ----------
-    lf : array_like, shape (V, U, Y, X[, C])
-        Views of at least 2 x 2 pixels.
-
-    Returns
-    -------
-    float
-        0.0 when the light field has no detail at all.
-
-    Raises
-    ------
-    ValueError
-        On views smaller than 2 x 2 pixels.
-    """
-    a = np.asarray(lf, dtype=np.float32)
-    if a.ndim == 4:
-        a = a[..., None]
-    if min(a.shape[2:4]) < 2:
-        raise ValueError(f"the noise estimate needs views of at least 2 x 2 pixels, not {a.shape[2]} x {a.shape[3]}")
-    b = _NOISE_BLOCK
-    Yb, Xb = a.shape[2] // (2 * b), a.shape[3] // (2 * b)
-    if Yb == 0 or Xb == 0:
-        Y, X = a.shape[2] // 2 * 2, a.shape[3] // 2 * 2
-        views = a[:, :, :Y, :X].reshape(-1, Y, X, a.shape[4])
-        return float(np.median(np.abs(_haar_hh(views)))) / 0.6744897501960817
-    U, C = a.shape[1], a.shape[4]
-    means, brightness = [], []
-    for row in a:  # one row of views at a time: the temporaries stay small
-        r = row[:, : 2 * b * Yb, : 2 * b * Xb]
-        sq = np.square(_haar_hh(r).reshape(U, Yb, b, Xb, b, C).transpose(0, 1, 3, 5, 2, 4).reshape(-1, b * b))
-        level = r.reshape(U, Yb, 2 * b, Xb, 2 * b, C).mean(axis=(2, 4)).reshape(-1)  # in the order of sq's blocks
-        keep = sq.max(axis=1) > 0  # a block without any detail (clipped, constant) says nothing of the noise
-        means.append(np.partition(sq[keep], _NOISE_KEPT - 1, axis=1)[:, :_NOISE_KEPT].mean(axis=1, dtype=np.float64))
-        brightness.append(level[keep])
-    means, brightness = np.concatenate(means), np.concatenate(brightness)
-    if means.size == 0:
-        return 0.0
-    n_bins = max(1, min(_NOISE_BINS, means.size // 100))
-    bins = np.array_split(np.argsort(brightness, kind="stable"), n_bins)  # equal shares of the blocks
-    variance = np.mean([np.quantile(means[i], _NOISE_QUANTILE) for i in bins]) / _NOISE_UNIT
-    return float(np.sqrt(variance))
-
-
-def _haar_hh(a: np.ndarray) -> np.ndarray:
-    """The finest diagonal Haar detail of views ``(N, Y, X, C)`` (even ``Y``, ``X``): ``(N, Y/2, X/2, C)``."""
-    return (a[:, 0::2, 0::2] - a[:, 0::2, 1::2] - a[:, 1::2, 0::2] + a[:, 1::2, 1::2]) * 0.5

@@ -4,7 +4,8 @@
 
 * ``method='tv'``: regularised least squares with the exact blur operator
   of :mod:`napari_lfdeblur.blur` and a 4D total-variation prior over all
-  four axes ``(v, u, y, x)``,
+  four axes ``(v, u, y, x)``, on a colour light field by default the colour
+  TV [6]_ (one norm over the axes and the channels),
 
       min_l  1/2 ||K_p l - f||^2 + weight * TV4(l),   l in [0, 1] (optional box),
 
@@ -18,7 +19,8 @@
   momentum is restarted when the objective rises or the step turns back
   [3]_. It stops when the objective decreases by less than ``tol`` times its
   value in one iteration. The default weight is ``NOISE_WEIGHT_FACTOR``
-  times the noise level estimated in the data (:func:`estimate_noise_sigma`).
+  (``COLOUR_WEIGHT_FACTOR`` for the colour TV) times the noise level
+  estimated in the data (:func:`estimate_noise_sigma`).
 * ``method='inplane'``: for an in-plane path (``p_z = 0``) and ``d_inf = 0``
   the exact angular solve of :func:`~napari_lfdeblur.special_cases.solve_inplane`
   (Tikhonov on the angular differences), one small matrix for all pixels:
@@ -39,10 +41,14 @@ References
        IEEE Trans. Image Process. 18, 2009.
 .. [3] B. O'Donoghue and E. Candes, "Adaptive restart for accelerated
        gradient schemes", Found. Comput. Math. 15, 2015.
-.. [4] D. L. Donoho and I. M. Johnstone, "Ideal spatial adaptation by
-       wavelet shrinkage", Biometrika 81, 1994 (the MAD noise estimate).
+.. [4] S. Pyatykh, J. Hesser and L. Zheng, "Image noise level estimation
+       by principal component analysis", IEEE Trans. Image Process. 22, 2013
+       (the noise estimate).
 .. [5] P. P. Srinivasan, R. Ng and R. Ramamoorthi, "Light Field Blind Motion
        Deblurring", CVPR 2017.
+.. [6] X. Bresson and T. F. Chan, "Fast dual minimization of the vectorial
+       total variation norm and applications to color image processing",
+       Inverse Problems and Imaging 2, 2008.
 """
 
 from __future__ import annotations
@@ -60,7 +66,8 @@ from .blur import BlurOperator, from_tensor, to_tensor, validate_frame
 from .devices import select_device
 from .path import has_rotation, validate_control_points, validate_n_times
 from .special_cases import inplane_matrix, solve_inplane
-from ._tv_solvers import estimate_noise_sigma, iter_fista_tv
+from ._noise import estimate_noise_sigma
+from ._tv_solvers import iter_fista_tv
 
 __all__ = [
     "DeconvolutionParams",
@@ -100,8 +107,8 @@ class DeconvolutionParams(JsonParams):
         None (the default) sets it from the data: ``NOISE_WEIGHT_FACTOR *
         sigma`` with ``sigma`` from :func:`estimate_noise_sigma` (the
         optimal TV weight of the least-squares objective grows with the
-        noise level), ``COLOUR_WEIGHT_FACTOR * sigma`` for the colour TV. For ``'inplane'`` it multiplies the squared
-        angular gradient (Tikhonov; None: 2e-3), and 0 gives the exact
+        noise level), ``COLOUR_WEIGHT_FACTOR * sigma`` for the colour TV.
+        For ``'inplane'`` it multiplies the squared angular gradient (Tikhonov; None: 2e-3), and 0 gives the exact
         (pseudo-)inverse.
     n_iter : int
         Maximum iterations of ``'tv'`` (each one blur forward and adjoint).
@@ -114,10 +121,12 @@ class DeconvolutionParams(JsonParams):
         Weights of the ``(v, u, y, x)`` differences in the TV.
     couple_channels : bool
         ``'tv'`` on a colour light field: one colour TV over all channels
-        (the norm per sample taken over the channels too, see
+        (the default; the norm per sample taken over the channels too, see
         :func:`~napari_lfdeblur.priors.tv4d`), solved for all channels at
-        once; False solves every channel on its own with its own TV, in a
-        third of the memory.
+        once, so that edges the channels share are kept and noise that they
+        do not share is removed. False solves every channel on its own with
+        its own TV, in about a third of the memory; it suits channels whose
+        edges are unrelated.
     clip : bool
         Constrain the estimate to [0, 1] when the input lies in [0, 1].
     """
@@ -128,7 +137,7 @@ class DeconvolutionParams(JsonParams):
     tol: float = 1e-4
     isotropic: bool = True
     axis_weights: tuple = (1.0, 1.0, 1.0, 1.0)
-    couple_channels: bool = False
+    couple_channels: bool = True
     clip: bool = True
 
     _what = "deconvolution"

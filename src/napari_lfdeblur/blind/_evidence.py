@@ -17,7 +17,7 @@ import math
 import numpy as np
 import torch
 
-from .._tv_solvers import estimate_noise_sigma
+from .._noise import estimate_noise_sigma
 from ..blur import BlurOperator, image_shifts
 from ..path import bezier_positions
 from ..priors import gradient_yx
@@ -49,9 +49,9 @@ class Identity:
 def noise_sigma(g: torch.Tensor) -> float:
     """Robust estimate of the noise standard deviation of (V, U, Y, X, C).
 
-    :func:`~napari_lfdeblur.deconvolution.estimate_noise_sigma` (from the
-    least detailed blocks of the finest diagonal Haar detail of every view),
-    the estimate the non-blind weight rule uses too.
+    :func:`~napari_lfdeblur.deconvolution.estimate_noise_sigma` (the
+    smallest principal component of the least detailed patches), the
+    estimate the non-blind weight rule uses too.
     """
     return estimate_noise_sigma(g.detach().cpu().numpy())
 

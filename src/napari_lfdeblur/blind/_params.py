@@ -384,7 +384,7 @@ PRESETS = {
         final_n_times=7,
         joint=JointParams(n_iter=1000, lr=1.0, lf_lr=0.04, prior_weight=8e-3, prior_decay=0.997, prior_floor=0.1,
                           eps=0.12, eps_decay=0.997, eps_min=0.04),
-        final=DeconvolutionParams(method="tv", weight=0.004, n_iter=100, tol=0.0),
+        final=DeconvolutionParams(method="tv", weight=0.004, n_iter=100, tol=0.0, couple_channels=False),
     ),
 }
 
