@@ -12,7 +12,7 @@ __all__ = ["estimate_noise_sigma"]
 PATCH = 5
 #: at most this many patches are read (a regular subsampling of the positions beyond it)
 MAX_PATCHES = 1_000_000
-#: below this many patches the classical estimate is used
+#: with fewer patches only the wavelet estimate is used; each brightness class holds at least this many
 MIN_PATCHES = 4000
 #: the patches are chosen where the neighbouring view is flat within this many px (the disparities it allows for)
 SHIFT = 3

@@ -108,8 +108,8 @@ class DeconvolutionParams(JsonParams):
         sigma`` with ``sigma`` from :func:`estimate_noise_sigma` (the
         optimal TV weight of the least-squares objective grows with the
         noise level), ``COLOUR_WEIGHT_FACTOR * sigma`` for the colour TV.
-        For ``'inplane'`` it multiplies the squared angular gradient (Tikhonov; None: 2e-3), and 0 gives the exact
-        (pseudo-)inverse.
+        For ``'inplane'`` it multiplies the squared angular gradient
+        (Tikhonov; None: 2e-3), and 0 gives the exact (pseudo-)inverse.
     n_iter : int
         Maximum iterations of ``'tv'`` (each one blur forward and adjoint).
     tol : float
