@@ -557,6 +557,14 @@ def test_cli_deconvolve(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
     assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--method", "tv",
                  "--iterations", "3", "--device", "cpu"]) == 0
+    # colour: the colour TV unless --separate-channels
+    colour = np.stack([blurred, blurred[::-1], blurred[:, ::-1]], axis=-1)
+    np.savez(src, lf=colour)
+    for flag, coupled in (([], True), (["--separate-channels"], False)):
+        assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--iterations", "3", *flag]) == 0
+        ref = deconvolve(colour, cp, n_times=8, n_iter=3, couple_channels=coupled)
+        np.testing.assert_allclose(read_lightfield(out), ref, atol=1e-5)
+    np.savez(src, lf=blurred)
     # bad input: one line, exit status 2
     assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--weight", "-1"]) == 2
     assert "weight" in capsys.readouterr().err

@@ -252,6 +252,34 @@ def test_deconvolve_tv_with_path_from_path_layer(make_napari_viewer, qtbot, lf, 
     assert viewer.layers["b deconvolved"].metadata["parameters"]["weight"] is None
 
 
+def test_deconvolve_colour_tv_box(make_napari_viewer, qtbot, notifications):
+    from napari_lfdeblur import synthetic_scene
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+    from napari_lfdeblur.deconvolution import deconvolve
+
+    colour, _ = synthetic_scene((3, 3, 16, 16), color=True, seed=2)
+    cp = np.array([[-0.5, 0.2, 0.1], [0.6, -0.3, -0.1]])
+    blurred = simulate_blur(colour, cp, n_times=6)
+    viewer = make_napari_viewer()
+    viewer.add_image(blurred, name="b", rgb=True)
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    w.layer_combo.set_layer("b")
+    w.table.set_control_points(cp)
+    w.form.n_times.value = 6
+    w.form.n_iter.value = 4
+    assert w.form.couple_channels.value  # the colour TV by default
+    for coupled in (True, False):
+        w.form.couple_channels.value = coupled
+        w.run()
+        _wait_done(qtbot, w)
+        assert not [n for n in notifications if n[0] == "error"], notifications
+        out = viewer.layers["b deconvolved"]
+        ref = deconvolve(blurred, cp, n_times=6, n_iter=4, couple_channels=coupled)
+        np.testing.assert_allclose(out.data, ref, atol=1e-5)
+        assert out.metadata["parameters"]["couple_channels"] is coupled
+        viewer.layers.remove(out)
+
+
 def test_deconvolve_solver_error_is_a_notification(make_napari_viewer, qtbot, lf, notifications):
     from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
 

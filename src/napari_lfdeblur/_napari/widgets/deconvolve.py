@@ -33,7 +33,7 @@ __all__ = ["DeconvolveWidget"]
 
 def _fields() -> list:
     """The solver fields of the form, named as ``iter_deconvolve``'s keyword arguments."""
-    from ...deconvolution import METHODS
+    from ...deconvolution import COLOUR_WEIGHT_FACTOR, METHODS, NOISE_WEIGHT_FACTOR
 
     return [
         spin("n_times", 32, 2, 1024, label="instants T", tooltip="exposure instants T of the blur model"),
@@ -42,9 +42,13 @@ def _fields() -> list:
         ComboBox(name="method", choices=[m for m in METHODS if m != "auto"], value="tv",
                  tooltip="tv: 4D total variation, any path and d_inf; inplane: the exact angular solve, "
                          "p_z = 0 and d_inf = 0 only"),
+        CheckBox(name="couple_channels", value=True, label="colour TV",
+                 tooltip="tv on colour: one TV over the channels, which keeps the edges they share (the "
+                         "default); untick for one TV per channel, in about a third of the memory"),
         CheckBox(name="noise_weight", value=True, label="weight from noise",
-                 tooltip="TV weight = 0.3 x the noise level estimated in the data (inplane: 2e-3); "
-                         "untick to set the weight yourself"),
+                 tooltip=f"TV weight = {COLOUR_WEIGHT_FACTOR} x (colour TV) or {NOISE_WEIGHT_FACTOR} x (one TV per "
+                         "channel) the noise level estimated in the data (inplane: 2e-3); untick to set the "
+                         "weight yourself"),
         fspin("weight", 2e-3, 0.0, 10.0, 1e-5, tooltip="regularisation weight (TV or angular Tikhonov)"),
         spin("n_iter", 100, 1, 100000, label="iterations", tooltip="maximum iterations of the TV solver"),
         device_choice(),
