@@ -13,7 +13,7 @@ import math
 
 import torch
 
-from .priors import divergence4d, gradient_norm_bound, project_tv_dual
+from .priors import divergence4d, gradient_norm_bound, project_tv_dual, sum_channels_
 
 __all__ = ["TVProx", "add_gradient_", "tv_value", "iter_fista_tv"]
 
@@ -58,7 +58,7 @@ def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False) -> float:
             total += float(diff.abs_().sum())
     if not isotropic:
         return total
-    return float((acc.sum(-1) if coupled else acc).sqrt_().sum())
+    return float((sum_channels_(acc) if coupled else acc).sqrt_().sum())
 
 
 class TVProx:

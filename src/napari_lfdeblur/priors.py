@@ -26,6 +26,7 @@ __all__ = [
     "gradient_magnitude4d",
     "tv4d",
     "project_tv_dual",
+    "sum_channels_",
     "prox_l1",
     "gradient_norm_bound",
     "gradient_yx",
@@ -299,20 +300,26 @@ def project_tv_dual(P: Sequence[torch.Tensor], radius: float, isotropic: bool = 
     norm = torch.mul(P[0], P[0], out=work) if work is not None else P[0] * P[0]
     for p in P[1:]:
         norm.addcmul_(p, p)
-    scale = norm
-    if coupled_channels:  # the norm over the channels too
-        scale = norm.narrow(-1, 0, 1).clone()
-        for c in range(1, norm.shape[-1]):
-            scale.add_(norm.narrow(-1, c, 1))
+    scale = sum_channels_(norm) if coupled_channels else norm  # the norm over the channels too
     scale.sqrt_()
     if radius != 1.0:  # the TV prox's ball is the unit one: no pass for it
         scale.div_(radius)
     scale.clamp_(min=1.0)
-    if scale is not norm and norm.shape[-1] > 1:  # spread back over the channels: same-shape divisions are faster
-        scale = norm.copy_(scale.expand_as(norm))
+    if scale is not norm:  # spread back over the channels: same-shape divisions are faster than broadcasting
+        for c in range(1, norm.shape[-1]):
+            norm.narrow(-1, c, 1).copy_(scale)
+        scale = norm
     for p in P:
         p.div_(scale)
     return tuple(P)
+
+
+def sum_channels_(t: torch.Tensor) -> torch.Tensor:
+    """The sum over the last axis, written into (and returned as) ``t``'s first channel: a view, no new tensor."""
+    first = t.narrow(-1, 0, 1)
+    for c in range(1, t.shape[-1]):
+        first.add_(t.narrow(-1, c, 1))
+    return first
 
 
 def prox_l1(x: torch.Tensor, threshold: float) -> torch.Tensor:
