@@ -144,6 +144,19 @@ def test_clear_blur_is_found_with_its_evidence(linear_result):
     assert ev["reach"] > 1.0 and "rejected_path" not in info
 
 
+@pytest.mark.parametrize("gain_ok, relative_ok, reach_ok", [(False, True, True), (True, False, True),
+                                                            (True, True, False), (False, False, False)])
+def test_evidence_message_names_every_unmet_condition(gain_ok, relative_ok, reach_ok):
+    ev = {"blur_found": False, "gain": 5.0 if gain_ok else 0.5, "relative": 0.2 if relative_ok else 0.01,
+          "reach": 2.0 if reach_ok else 0.1}
+    message = _evidence.evidence_message(ev)
+    assert message.startswith("little blur found, the input is returned unchanged: ")
+    assert ("noise variances" in message) != gain_ok
+    assert ("by 1.0 % (needs > 6 %)" in message) != relative_ok
+    assert ("moves the image by 0.10 px" in message) != reach_ok
+    assert "restored anyway" in _evidence.evidence_message(ev, required=False)
+
+
 @pytest.mark.parametrize("extent", [0.0, 0.15])
 def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent):
     sharp = _scene()
@@ -154,6 +167,7 @@ def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent):
     assert psnr(res.lightfield, sharp) >= psnr(blurred, sharp) - 0.1
     assert res.info["blur_found"] is False and res.info["message"].startswith("little blur found")
     assert not np.any(res.control_points) and res.info["evidence"]["relative"] < 0.06
+    assert "salient-edge objective" in res.info["message"]  # the margin it missed is named
     if extent:  # require_evidence=False restores with the path estimated, whatever the evidence
         forced = blind_deblur(blurred, params=BlindParams().replace(n_control_points=2, require_evidence=False, **FAST),
                               device="cpu")

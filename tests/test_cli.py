@@ -77,6 +77,22 @@ def test_demo_quick(tmp_path):
     np.testing.assert_allclose(load_path_json(out / "synthetic_blurred.path.json"), summary["true_control_points"])
 
 
+def test_demo_quick_blind_says_what_it_found(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--quick", "--device", "cpu"]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    for name, rec in summary["samples"].items():
+        assert f"  blind: {rec['blind_message']}" in printed
+        assert rec["blind_blur_found"] == rec["blind_message"].startswith("blur found")
+        blurred, restored = (read_lightfield(out / f"{name}_{kind}.npz") for kind in ("blurred", "blind"))
+        if rec["blind_blur_found"]:
+            assert "blind_rejected_path" not in rec and not np.array_equal(restored, blurred)
+        else:  # the input comes back unchanged, and the summary keeps the path that was rejected
+            np.testing.assert_array_equal(restored, blurred)
+            assert np.asarray(rec["blind_rejected_path"]).shape[1] == 3 and not np.any(rec["blind_control_points"])
+
+
 def test_transposed_views_are_named_and_swapped_on_request(tmp_path, capsys):
     from _reference import moving_texture
 

@@ -286,6 +286,10 @@ def _run_demo(args):
     print(f"demo results in {summary['out_dir']}:")
     for name in summary["files"]:
         print(f"  {name}")
+    for name, rec in summary["samples"].items():
+        print(f"{name}: PSNR " + ", ".join(f"{k} {v:.1f} dB" for k, v in rec["psnr_db"].items()))
+        if "blind_message" in rec:
+            print(f"  blind: {rec['blind_message']}")
 
 
 # ------------------------------------------------------------------ info

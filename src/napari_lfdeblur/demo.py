@@ -46,7 +46,11 @@ def _samples(quick: bool):
     }
 
 
-def _figure(path, sharp, results, true_cp, est_cp, title):
+def _figure(path, sharp, results, paths, title, notes=None):
+    """Centre views and EPIs of the sharp light field and ``results``; ``paths`` (label -> (n, 3) or None) beside.
+
+    ``notes``: a line under a result's panel title (name -> text).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -62,7 +66,7 @@ def _figure(path, sharp, results, true_cp, est_cp, title):
     for col, (name, lf) in enumerate(zip(names, arrays)):
         show = np.clip(lf, 0, 1)
         axes[0, col].imshow(show[V // 2, U // 2])
-        axes[0, col].set_title(name, fontsize=10)
+        axes[0, col].set_title(name + (f"\n{notes[name]}" if name in (notes or {}) else ""), fontsize=10)
         axes[1, col].imshow(horizontal_epi(show, V // 2, Y // 2), aspect="auto", interpolation="nearest")
         axes[2, col].imshow(vertical_epi(show, U // 2, X // 2), aspect="auto", interpolation="nearest")
         for r in range(3):
@@ -76,7 +80,7 @@ def _figure(path, sharp, results, true_cp, est_cp, title):
         axes[r, -1].remove()
     ax = fig.add_subplot(gs[:, -1])
     t = np.linspace(0, 1, 64)
-    for cp, style, label in ((true_cp, "-", "true"), (est_cp, "--", "blind estimate")):
+    for (label, cp), style in zip(paths.items(), ("-", "--", ":")):
         if cp is None:
             continue
         pos = bezier_positions(cp, 64)
@@ -133,7 +137,7 @@ def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> l
         write_lightfield(out / f"{name}_deconvolved.npz", restored, overwrite=True)
     results["deconvolved (path known)"] = restored
     files.append(f"{name}_deconvolved.npz")
-    est_cp = None
+    paths, notes = {"true": DEMO_PATH, "blind estimate": None}, {}
     if blind:
         from .blind import blind_deblur
         from .metrics import path_error
@@ -146,10 +150,19 @@ def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> l
         files.append(f"{name}_blind.npz")
         rec["blind_control_points"] = np.asarray(est_cp).tolist()
         rec["blind_path_error"] = path_error(est_cp, DEMO_PATH, lightfield=sharp).as_dict()
+        rec["blind_blur_found"] = bool(res.info["blur_found"])
+        rec["blind_message"] = res.info["message"]
+        paths["blind estimate"] = est_cp
+        if "rejected_path" in res.info:  # the evidence test returned the input: show what it rejected
+            rejected = res.info["rejected_path"]
+            rec["blind_rejected_path"] = np.asarray(rejected).tolist()
+            rec["blind_rejected_path_error"] = path_error(rejected, DEMO_PATH, lightfield=sharp).as_dict()
+            paths["rejected estimate"] = rejected
+            notes["blind"] = "(little blur found: the input)"
     rec["psnr_db"] = {k: round(psnr(v, sharp, crop=CROP), 2) for k, v in results.items()}
     rec["ssim"] = {k: round(ssim(v, sharp, crop=CROP), 4) for k, v in results.items()}
     title = f"{name}: " + ", ".join(f"{k} {v:.1f} dB" for k, v in rec["psnr_db"].items())
-    _figure(out / f"{name}.png", sharp, results, DEMO_PATH, est_cp, title)
+    _figure(out / f"{name}.png", sharp, results, paths, title, notes)
     return files + [f"{name}.png"]
 
 

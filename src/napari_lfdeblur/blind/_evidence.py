@@ -104,6 +104,9 @@ def evidence_message(evidence: dict, required: bool = True) -> str:
     if not e["gain"] > EVIDENCE_MARGIN:
         why.append(f"the blur model explains {e['gain']:.2f} noise variances per sample more than no blur "
                    f"(needs > {EVIDENCE_MARGIN:g})")
+    if not e["relative"] > RELATIVE_MARGIN:
+        why.append(f"it lowers the salient-edge objective of no blur by {100 * e['relative']:.1f} % "
+                   f"(needs > {100 * RELATIVE_MARGIN:g} %)")
     if not e["reach"] >= MIN_REACH:
         why.append(f"it moves the image by {e['reach']:.2f} px at most (needs >= {MIN_REACH:g})")
     verdict = "the input is returned unchanged" if required else "restored anyway (require_evidence=False)"
