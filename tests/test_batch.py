@@ -101,6 +101,14 @@ def test_deblur_equals_the_serial_api_bit_for_bit(client, tmp_path):
         assert np.array_equal(read_lightfield(tmp_path / "out" / f"{p.stem}.npz"), want.lightfield)
         np.testing.assert_array_equal(load_path_json(tmp_path / "out" / f"{p.stem}.path.json"),
                                       want.control_points)
+        # the evidence test's verdict, its reason and a rejected path come along
+        assert read_manifest(tmp_path / "out")[f"{p.stem}.npz"]["blur_found"] is want.info["blur_found"]
+        doc = json.loads((tmp_path / "out" / f"{p.stem}.path.json").read_text())
+        assert doc["blur_evidence"] == want.info["message"]
+        if "rejected_path" in want.info:
+            np.testing.assert_array_equal(doc["rejected_control_points"], want.info["rejected_path"])
+        else:
+            assert "rejected_control_points" not in doc
 
 
 def test_bad_items_are_recorded_and_the_others_complete(client, inputs, tmp_path, capsys):
@@ -191,8 +199,11 @@ def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
     argv = ["batch", "deblur", str(tmp_path / "in" / "*.npz"), str(tmp_path / "out"), "--params",
             str(tmp_path / "tiny.json"), "--scheduler", client.scheduler.address, "--device", "cpu"]
     assert main(argv) == 0
-    assert "all 1 items" in capsys.readouterr().out
-    assert read_manifest(tmp_path / "out")["c0.npz"]["status"] == "ok"
+    printed = capsys.readouterr().out
+    rec = read_manifest(tmp_path / "out")["c0.npz"]
+    assert "all 1 items" in printed and rec["status"] == "ok"
+    # the count of inputs returned unchanged is said when there are any
+    assert ("1 with little blur found, returned unchanged" in printed) is (rec["blur_found"] is False)
     assert "lfdeblur batch deblur" in (tmp_path / "out" / "README.md").read_text()
     assert main(argv) == 0 and "1 already done" in capsys.readouterr().out
 

@@ -197,6 +197,39 @@ def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, 
     assert doc["motion"] == (motion or "3dof")
 
 
+def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_it(lf_file, tmp_path, monkeypatch,
+                                                                                  capsys):
+    import shlex
+
+    from napari_lfdeblur import blind, deconvolve
+    from napari_lfdeblur.progress import Progress
+
+    lf, src = lf_file
+    rejected = linear_path(1.5, 30.0)
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):  # the evidence test says no
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind.BlindResult(lf, np.zeros((3, 3)), params=params,
+                                 info={"blur_found": False, "message": "little blur found", "rejected_path": rejected})
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
+    args = ["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--infinity-disparity", "0.5"]
+    assert main(args) == 0
+    printed = capsys.readouterr().out.splitlines()
+    np.testing.assert_allclose(load_path_json(tmp_path / "o_path_rejected.json"), rejected)
+    command = shlex.split(printed[printed.index("little blur found") + 1].split("again: ")[1])
+    assert command[:2] == ["lfdeblur", "deconvolve"] and command[-1] == "OUTPUT"
+    # the printed command restores with the rejected path, at the d_inf the file records
+    assert main([*command[1:-1], str(tmp_path / "r.npz"), "--device", "cpu", "--iterations", "5"]) == 0
+    expected = deconvolve(lf, rejected, infinity_disparity=0.5, n_iter=5, device="cpu")
+    np.testing.assert_allclose(read_lightfield(tmp_path / "r.npz"), expected, atol=1e-5)
+    # a second run would replace the rejected path's file: refused without --overwrite
+    (tmp_path / "o.npz").unlink()
+    (tmp_path / "o_path.json").unlink()
+    assert main(args) == 2
+    assert "o_path_rejected.json exists" in capsys.readouterr().err and not (tmp_path / "o.npz").exists()
+
+
 def test_deblur_help_describes_motion(capsys):
     with pytest.raises(SystemExit):
         main(["deblur", "--help"])

@@ -371,9 +371,10 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     w.run()
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
-    assert [layer.name for layer in viewer.layers] == ["b", "b deblurred (blind)", "b estimated path"]
-    out = viewer.layers["b deblurred (blind)"]
     res = w.last_result
+    rejected = [] if res.info["blur_found"] else ["b rejected path"]  # the evidence test's verdict
+    assert [layer.name for layer in viewer.layers] == ["b", "b deblurred (blind)", "b estimated path", *rejected]
+    out = viewer.layers["b deblurred (blind)"]
     assert out.data.shape == SHAPE and out.axis_labels == ("v", "u", "y", "x")
     np.testing.assert_array_equal(out.data, res.lightfield)
     meta = out.metadata
@@ -684,6 +685,47 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["require_evidence"] is False
     w.form.preset.value = "paper"  # choosing a preset shows its own setting again
     assert w.form.restore_anyway.value is False
+    assert not [n for n in notifications if n[0] == "error"], notifications
+
+
+def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_viewer, monkeypatch, lf,
+                                                                    notifications):
+    import napari_lfdeblur.blind as blind_core
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+    from napari_lfdeblur.progress import Progress
+
+    rejected = np.array([[-0.6, 0.3, 0.1], [0.2, -0.4, 0.0], [0.4, 0.1, -0.1]])
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):  # the evidence test says no
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params,
+                                      info={"blur_found": False, "message": "little blur found",
+                                            "rejected_path": rejected})
+
+    monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
+    viewer = make_napari_viewer()
+    layer, _ = _blind_layer(viewer, lf)
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    w.form.infinity_disparity.value = 0.5
+    names = [layer.name for layer in w.run_and_wait(timeout=60)]
+    assert names == ["b deblurred (blind)", "b estimated path", "b rejected path"]
+    assert notifications[-1][0] == "info" and "little blur found" in notifications[-1][1]
+    assert "'b rejected path'" in notifications[-1][1]
+    d = _dock(viewer, DeconvolveWidget(viewer))
+    d.path_source.path_layer.set_layer("b rejected path")
+    d.path_source.take_button.clicked.emit()
+    np.testing.assert_allclose(d.table.control_points(), rejected)
+    assert d.form.infinity_disparity.value == 0.5
+    # with blur found nothing is rejected: no such layer
+    def fake_found(lf, *, infinity_disparity, params, device, seed):
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind_core.BlindResult(lf, rejected, loss_history=[1.0], params=params, info={"blur_found": True})
+
+    monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_found)
+    viewer.layers.remove("b rejected path")
+    assert "b rejected path" not in [layer.name for layer in w.run_and_wait(timeout=60)]
     assert not [n for n in notifications if n[0] == "error"], notifications
 
 

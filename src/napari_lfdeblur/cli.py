@@ -9,6 +9,7 @@ exit status 2, never as a traceback.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -197,7 +198,8 @@ def _add_deblur(sub):
     p.add_argument("--restore-anyway", action="store_true",
                    help="restore with the estimated path even when the data give little evidence of blur "
                         "(BlindParams.require_evidence=False; default: return the input unchanged then)")
-    p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT)")
+    p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT); "
+                                      "a path that the evidence test rejects goes beside it, as *_rejected.json")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
 
 
@@ -226,7 +228,8 @@ def _run_deblur(args):
 
     out = Path(args.output)
     path_file = Path(args.path_out) if args.path_out else out.with_name(out.stem + "_path.json")
-    for target in (out, path_file):
+    rejected_file = path_file.with_name(path_file.stem + "_rejected" + path_file.suffix)
+    for target in (out, path_file, rejected_file):
         if target.exists() and not args.overwrite:
             raise CLIError(f"{target} exists; pass --overwrite to replace it")
     if args.params:
@@ -263,8 +266,24 @@ def _run_deblur(args):
                    timings=result.timings)
     if "message" in result.info:
         print(result.info["message"])
+    if "rejected_path" in result.info:
+        save_path_json(rejected_file, result.info["rejected_path"], overwrite=True, n_times=params.n_times,
+                       infinity_disparity=d_inf, motion=params.motion)
+        print(f"the path it rejected is in {rejected_file}; to restore with it without estimating it again: "
+              f"{_deconvolve_command(args, rejected_file)}")
     print(f"wrote {out} {result.lightfield.shape} and its path {path_file}{_rotation_note(result.control_points)} "
           f"({result.timings.get('total', float('nan')):.1f} s)")
+
+
+def _deconvolve_command(args, path_file) -> str:
+    """The ``lfdeblur deconvolve`` line that reads ``args.input`` as ``deblur`` did and restores with ``path_file``."""
+    words = ["lfdeblur", "deconvolve", args.input, str(path_file), "OUTPUT"]
+    if args.swap_views:
+        words.append("--swap-views")
+    if args.angular_crop is not None:
+        crop = args.angular_crop
+        words += ["--angular-crop", ",".join(map(str, crop)) if isinstance(crop, tuple) else str(crop)]
+    return shlex.join(words)
 
 
 # ------------------------------------------------------------------ demo

@@ -159,8 +159,13 @@ def _deblur(lf, spec: dict, device):
     params = BlindParams.from_dict(p["params"])
     result = blind_deblur(lf, params=params, infinity_disparity=p["infinity_disparity"], device=device,
                           seed=spec["item_seed"])
+    info = result.info
     extra = {"n_times": params.n_times, "infinity_disparity": p["infinity_disparity"],
-             "timings": result.timings}
+             "timings": result.timings, "blur_found": bool(info.get("blur_found", True))}
+    if "message" in info:
+        extra["blur_evidence"] = info["message"]
+    if "rejected_path" in info:  # the output is the input: keep the path, to restore with it later if wanted
+        extra["rejected_control_points"] = np.asarray(info["rejected_path"]).tolist()
     return result.lightfield, result.control_points, extra
 
 
@@ -226,6 +231,8 @@ def _run(spec: dict, out: Path, rec: dict) -> None:
             write_lightfield(out, result, overwrite=spec["overwrite"] or out.exists(), metadata=meta,
                              compress=False)
             rec["shape"] = list(result.shape)
+            if "blur_found" in extra:
+                rec["blur_found"] = extra["blur_found"]
         rec["size"] = out.stat().st_size
         rec["status"] = "ok"
     except Exception as exc:  # every failure of one item is recorded, never raised

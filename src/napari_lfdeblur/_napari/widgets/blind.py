@@ -287,12 +287,21 @@ class BlindDeblurWidget(SolverWidget):
             cp, job["shape"], n_times=n_times, name=f"{job['source']} estimated path",
             true_control_points=job["true"]))
         self.last_layers = [out, path]
+        info = getattr(result, "info", None) or {}
+        note = ""
+        if "rejected_path" in info:  # kept as a layer, for *Deconvolve 4D*: no need to estimate it again
+            rejected = add_layer(self.viewer, path_layer_data(
+                info["rejected_path"], job["shape"], n_times=n_times, name=f"{job['source']} rejected path",
+                true_control_points=job["true"],
+                metadata={"kind": "rejected path", "n_times": n_times,
+                          "infinity_disparity": job["settings"]["infinity_disparity"]}))
+            self.last_layers.append(rejected)
+            note = f"; the path it rejected is in the layer '{rejected.name}', for Deconvolve 4D"
         self.plot.plot(cp, job["true"], n_times=max(64, n_times))
         if meta["loss_history"] and len(meta["loss_history"]) != len(self.loss_plot.values):
             self.loss_plot.plot(meta["loss_history"], [])
         else:
             self.loss_plot.plot(self.loss_plot.values)
         self.epi.layer_combo.set_layer(out)
-        info = getattr(result, "info", None) or {}
         if info.get("blur_found") is False:
-            notify_info(f"{self.title}: {info.get('message', 'little blur found')}")
+            notify_info(f"{self.title}: {info.get('message', 'little blur found')}{note}")
