@@ -293,7 +293,7 @@ class BlindDeblurWidget(SolverWidget):
             rejected = add_layer(self.viewer, path_layer_data(
                 info["rejected_path"], job["shape"], n_times=n_times, name=f"{job['source']} rejected path",
                 true_control_points=job["true"],
-                metadata={"kind": "rejected path", "n_times": n_times,
+                metadata={"kind": "rejected path",
                           "infinity_disparity": job["settings"]["infinity_disparity"]}))
             self.last_layers.append(rejected)
             note = f"; the path it rejected is in the layer '{rejected.name}', for Deconvolve 4D"
