@@ -131,7 +131,7 @@ def blind(quick: bool):
         print("blind run failed or timed out", file=sys.stderr)
         viewer.close()
         return
-    result, path = layers
+    result, path = layers[:2]  # a third layer, the rejected path, when it finds little blur
     w.epi.layer_combo.set_layer(result)
     w.epi.show_epis()
     _show_only(viewer, {result.name, path.name, *w.epi.layer_names()})
