@@ -230,6 +230,24 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     assert "o_path_rejected.json exists" in capsys.readouterr().err and not (tmp_path / "o.npz").exists()
 
 
+def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_path, monkeypatch, capsys):
+    from napari_lfdeblur import blind
+    from napari_lfdeblur.progress import Progress
+
+    _, src = lf_file
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+        yield Progress("path", 1, 4, loss=0.125)
+        yield Progress("path", 2, 4)  # inside a path-fit step: NaN loss
+        yield Progress("path", 3, 4)
+        return blind.BlindResult(lf, np.zeros((3, 3)), params=params)
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
+    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu"]) == 0
+    err = capsys.readouterr().err
+    assert "loss 0.125" in err and "nan" not in err
+
+
 def test_deblur_help_describes_motion(capsys):
     with pytest.raises(SystemExit):
         main(["deblur", "--help"])

@@ -252,7 +252,9 @@ def _run_deblur(args):
     def show(rec):
         bar.n = int(1000 * rec.fraction)
         bar.set_description(rec.stage, refresh=False)
-        bar.set_postfix_str(f"loss {rec.loss:.3g}", refresh=True)
+        if rec.loss == rec.loss:  # records inside a path-fit step carry no loss (NaN): the last one stays shown
+            bar.set_postfix_str(f"loss {rec.loss:.3g}", refresh=False)
+        bar.refresh()
 
     try:
         result = run_to_completion(gen, show)
