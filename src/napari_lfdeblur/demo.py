@@ -47,7 +47,7 @@ def _samples(quick: bool):
 
 
 def _figure(path, sharp, results, paths, title, notes=None):
-    """Centre views and EPIs of the sharp light field and ``results``; ``paths`` (label -> (n, 3) or None) beside.
+    """Centre views and EPIs of the sharp light field and ``results``; ``paths`` (label -> (n, 3)) beside.
 
     ``notes``: a line under a result's panel title (name -> text).
     """
@@ -81,8 +81,6 @@ def _figure(path, sharp, results, paths, title, notes=None):
     ax = fig.add_subplot(gs[:, -1])
     t = np.linspace(0, 1, 64)
     for (label, cp), style in zip(paths.items(), ("-", "--", ":")):
-        if cp is None:
-            continue
         pos = bezier_positions(cp, 64)
         for i, (comp, colour) in enumerate(zip(("p_x", "p_y", "p_z"), ("C0", "C1", "C2"))):
             ax.plot(t, pos[:, i], style, color=colour, label=f"{comp} {label}")
@@ -137,7 +135,7 @@ def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> l
         write_lightfield(out / f"{name}_deconvolved.npz", restored, overwrite=True)
     results["deconvolved (path known)"] = restored
     files.append(f"{name}_deconvolved.npz")
-    paths, notes = {"true": DEMO_PATH, "blind estimate": None}, {}
+    paths, notes = {"true": DEMO_PATH}, {}
     if blind:
         from .blind import blind_deblur
         from .metrics import path_error
