@@ -102,7 +102,8 @@ def test_deblur_equals_the_serial_api_bit_for_bit(client, tmp_path):
         np.testing.assert_array_equal(load_path_json(tmp_path / "out" / f"{p.stem}.path.json"),
                                       want.control_points)
         # the evidence test's verdict, its reason and a rejected path come along
-        assert read_manifest(tmp_path / "out")[f"{p.stem}.npz"]["blur_found"] is want.info["blur_found"]
+        rec = read_manifest(tmp_path / "out")[f"{p.stem}.npz"]
+        assert rec["blur_found"] is want.info["blur_found"] and rec["restoration"] == want.info["restoration"]
         doc = json.loads((tmp_path / "out" / f"{p.stem}.path.json").read_text())
         assert doc["blur_evidence"] == want.info["message"]
         if "rejected_path" in want.info:
@@ -204,8 +205,18 @@ def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
     assert "all 1 items" in printed and rec["status"] == "ok"
     # the count of inputs returned unchanged is said when there are any
     assert ("1 with little blur found, returned unchanged" in printed) is (rec["blur_found"] is False)
+    assert rec["restoration"] == ("full" if rec["blur_found"] else "none")
     assert "lfdeblur batch deblur" in (tmp_path / "out" / "README.md").read_text()
     assert main(argv) == 0 and "1 already done" in capsys.readouterr().out
+    # with a light restoration, those inputs are restored lightly, and counted so
+    (tmp_path / "light.json").write_text(TINY.replace(light_restoration=0.5).to_json())
+    argv[3], argv[5] = str(tmp_path / "light"), str(tmp_path / "light.json")
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    rec = read_manifest(tmp_path / "light")["c0.npz"]
+    assert rec["restoration"] == ("full" if rec["blur_found"] else "light")
+    assert ("1 with little blur found, restored lightly" in printed) is (rec["blur_found"] is False)
+    assert "returned unchanged" not in printed
 
 
 def test_embedded_cluster_workers_start_with_malloc_thresholds_no_profiler_and_slow_timers(monkeypatch):

@@ -26,7 +26,7 @@ from napari_lfdeblur.blind import (
     iter_blind_deblur,
 )
 from napari_lfdeblur.blur import BlurOperator, simulate_blur
-from napari_lfdeblur.deconvolution import DeconvolutionParams
+from napari_lfdeblur.deconvolution import DeconvolutionParams, deconvolve
 from napari_lfdeblur.path import bezier_positions, center_path, linear_path
 from napari_lfdeblur.priors import gradient_yx, sparse_gradient_prior
 from napari_lfdeblur.progress import run_to_completion, with_previews
@@ -138,7 +138,7 @@ def test_result_gauge_and_range(linear_case, linear_result):
 
 def test_clear_blur_is_found_with_its_evidence(linear_result):
     info = linear_result.info
-    assert info["blur_found"] is True and "blur found" in info["message"]
+    assert info["blur_found"] is True and "blur found" in info["message"] and info["restoration"] == "full"
     ev = info["evidence"]
     assert ev["gain"] > _evidence.EVIDENCE_MARGIN and ev["relative"] > _evidence.RELATIVE_MARGIN
     assert ev["reach"] > 1.0 and "rejected_path" not in info
@@ -155,6 +155,8 @@ def test_evidence_message_names_every_unmet_condition(gain_ok, relative_ok, reac
     assert ("by 1.0 % (needs > 6 %)" in message) != relative_ok
     assert ("moves the image by 0.10 px" in message) != reach_ok
     assert "restored anyway" in _evidence.evidence_message(ev, required=False)
+    light = _evidence.evidence_message(ev, light=0.5)
+    assert light.startswith("little blur found, a light restoration, with the estimated path at 50 % of its length")
 
 
 @pytest.mark.parametrize("extent", [0.0, 0.15])
@@ -168,11 +170,29 @@ def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent):
     assert res.info["blur_found"] is False and res.info["message"].startswith("little blur found")
     assert not np.any(res.control_points) and res.info["evidence"]["relative"] < 0.06
     assert "salient-edge objective" in res.info["message"]  # the margin it missed is named
+    assert res.info["restoration"] == "none" and np.any(res.info["rejected_path"])
     if extent:  # require_evidence=False restores with the path estimated, whatever the evidence
         forced = blind_deblur(blurred, params=BlindParams().replace(n_control_points=2, require_evidence=False, **FAST),
                               device="cpu")
-        assert "restored anyway" in forced.info["message"]
+        assert "restored anyway" in forced.info["message"] and forced.info["restoration"] == "full"
         np.testing.assert_array_equal(forced.control_points, res.info["rejected_path"])
+        # a light restoration: the final stage with the rejected path at half its length
+        params = BlindParams().replace(n_control_points=2, light_restoration=0.5, **FAST)
+        light = blind_deblur(blurred, params=params, device="cpu")
+        assert light.info["blur_found"] is False and light.info["restoration"] == "light"
+        assert "a light restoration, with the estimated path at 50 % of its length" in light.info["message"]
+        np.testing.assert_array_equal(light.info["rejected_path"], res.info["rejected_path"])
+        np.testing.assert_allclose(light.control_points, 0.5 * res.info["rejected_path"], atol=1e-12)
+        want = deconvolve(blurred, light.control_points, n_times=params.final_n_times, params=params.final,
+                          device="cpu")
+        np.testing.assert_allclose(light.lightfield, want, atol=1e-6)
+        assert not np.array_equal(light.lightfield, blurred)
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), "half"])
+def test_light_restoration_must_be_a_fraction(bad):
+    with pytest.raises((ValueError, TypeError), match="light_restoration"):
+        BlindParams(light_restoration=bad)
 
 
 def test_blind_deblurring_lowers_the_error_with_a_nonzero_infinity_disparity():

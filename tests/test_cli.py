@@ -253,3 +253,28 @@ def test_deblur_help_describes_motion(capsys):
         main(["deblur", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "--motion {3dof,6dof}" in text and "slower" in text and "rotation" in text
+
+
+def test_deblur_light_restoration_reaches_the_params_and_is_checked(lf_file, tmp_path, monkeypatch, capsys):
+    from napari_lfdeblur import blind
+    from napari_lfdeblur.progress import Progress
+
+    _, src = lf_file
+    seen = []
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+        seen.append(params)
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind.BlindResult(lf, np.zeros((3, 3)), params=params)
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
+    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu"]) == 0
+    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--overwrite",
+                 "--light-restoration", "0.25"]) == 0
+    assert [p.light_restoration for p in seen] == [0.0, 0.25]
+    capsys.readouterr()
+    for bad in ("1.5", "-0.1", "half"):
+        with pytest.raises(SystemExit):
+            main(["deblur", str(src), str(tmp_path / "x.npz"), "--light-restoration", bad])
+        assert "expected a number in [0, 1]" in capsys.readouterr().err
+    assert len(seen) == 2 and not (tmp_path / "x.npz").exists()

@@ -154,9 +154,11 @@ def _run(args) -> int:
         finally:
             bar.close()
     done = f"{report.n_ok} done, {report.n_skipped} already done (skipped)"
-    unchanged = sum(r.get("blur_found") is False for r in report.records if r["status"] == "ok")
-    if unchanged:
-        done += f"; {unchanged} with little blur found, returned unchanged (blur_found in the manifest)"
+    weak = [r.get("restoration", "none") for r in report.records if r["status"] == "ok" and r.get("blur_found") is False]
+    if weak.count("none"):
+        done += f"; {weak.count('none')} with little blur found, returned unchanged (blur_found in the manifest)"
+    if weak.count("light"):
+        done += f"; {weak.count('light')} with little blur found, restored lightly (restoration in the manifest)"
     if report.n_failed:
         print(f"lfdeblur batch {args.batch_command}: {report.n_failed} of {total} items failed ({done}); "
               f"see {Path(args.out_dir) / 'manifest.jsonl'}; rerun the same command to redo them", file=sys.stderr)

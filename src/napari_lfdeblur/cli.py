@@ -42,6 +42,17 @@ def _angular_crop(text: str):
     return sizes[0] if len(sizes) == 1 else sizes
 
 
+def _fraction(text: str) -> float:
+    """A number in [0, 1] (``--light-restoration``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number in [0, 1], such as 0.5") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number in [0, 1], such as 0.5")
+    return value
+
+
 def _input_argument(p, help_text="light field file or folder"):
     """The INPUT positional, ``--swap-views`` and ``--angular-crop``, shared by the commands that read a light field."""
     p.add_argument("input", help=help_text)
@@ -198,6 +209,10 @@ def _add_deblur(sub):
     p.add_argument("--restore-anyway", action="store_true",
                    help="restore with the estimated path even when the data give little evidence of blur "
                         "(BlindParams.require_evidence=False; default: return the input unchanged then)")
+    p.add_argument("--light-restoration", type=_fraction, metavar="FRACTION",
+                   help="when the data give little evidence of blur, restore with the estimated path scaled by "
+                        "FRACTION (in [0, 1]) instead of returning the input: a light restoration "
+                        "(BlindParams.light_restoration; default: the preset's, 0)")
     p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT); "
                                       "a path that the evidence test rejects goes beside it, as *_rejected.json")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
@@ -242,6 +257,8 @@ def _run_deblur(args):
         params = params.replace(latent={"edge_anisotropy": args.edge_anisotropy})
     if args.restore_anyway:
         params = params.replace(require_evidence=False)
+    if args.light_restoration is not None:
+        params = params.replace(light_restoration=args.light_restoration)
     if args.motion is not None:
         params = params.replace(motion=args.motion)
     lf, meta = _read(args)

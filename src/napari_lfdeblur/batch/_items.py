@@ -161,10 +161,11 @@ def _deblur(lf, spec: dict, device):
                           seed=spec["item_seed"])
     info = result.info
     extra = {"n_times": params.n_times, "infinity_disparity": p["infinity_disparity"],
-             "timings": result.timings, "blur_found": bool(info.get("blur_found", True))}
+             "timings": result.timings, "blur_found": bool(info.get("blur_found", True)),
+             "restoration": info.get("restoration", "full")}
     if "message" in info:
         extra["blur_evidence"] = info["message"]
-    if "rejected_path" in info:  # the output is the input: keep the path, to restore with it later if wanted
+    if "rejected_path" in info:  # the output is the input or a light restoration: keep the path, to restore with it
         extra["rejected_control_points"] = np.asarray(info["rejected_path"]).tolist()
     return result.lightfield, result.control_points, extra
 
@@ -232,7 +233,7 @@ def _run(spec: dict, out: Path, rec: dict) -> None:
                              compress=False)
             rec["shape"] = list(result.shape)
             if "blur_found" in extra:
-                rec["blur_found"] = extra["blur_found"]
+                rec["blur_found"], rec["restoration"] = extra["blur_found"], extra["restoration"]
         rec["size"] = out.stat().st_size
         rec["status"] = "ok"
     except Exception as exc:  # every failure of one item is recorded, never raised

@@ -374,19 +374,21 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     info["levels"] = [(g.shape[2] // k, g.shape[3] // k) for k in est.factors]
     frame = (window[0], window[1], Y, X) if p.motion == "6dof" else None
     evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev, frame)
-    info.update(blur_found=evidence["blur_found"], evidence=evidence,
-                message=evidence_message(evidence, p.require_evidence))
     restore = evidence["blur_found"] or not p.require_evidence
+    light = 0.0 if restore else p.light_restoration
+    info.update(blur_found=evidence["blur_found"], evidence=evidence,
+                message=evidence_message(evidence, p.require_evidence, light),
+                restoration="full" if restore else "light" if light else "none")
     cp = est.control_points if frame else path_in_frame(est.control_points, window, (Y, X))  # window -> frame
-    if not restore:  # the path estimated, kept for inspection; the result has no blur
+    if not restore:  # the path estimated, kept; a light restoration uses it scaled, else the result has no blur
         info["rejected_path"] = canonical_time_direction(center_path(cp, p.n_times))
-        cp = np.zeros_like(cp)
+        cp = info["rejected_path"] * light if light else np.zeros_like(cp)
     if tile is not None:
         info["tile"] = tuple(tile)
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
     del g
-    if p.final is not None and restore:
+    if p.final is not None and (restore or light):
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()

@@ -90,11 +90,13 @@ def evidence_weight(p: BlindParams) -> float:
     return p.latent.l0_weight * min(1.0, p.latent.l0_floor)
 
 
-def evidence_message(evidence: dict, required: bool = True) -> str:
+def evidence_message(evidence: dict, required: bool = True, light: float = 0.0) -> str:
     """A one-line description of the evidence for the blur, for people.
 
     ``required``: whether the result depends on it (else the light field was
-    restored with the path whatever the evidence).
+    restored with the path whatever the evidence). ``light``: the scale of
+    the path of a light restoration when little blur is found (0: the
+    input is returned).
     """
     e = evidence
     if e["blur_found"]:
@@ -109,7 +111,12 @@ def evidence_message(evidence: dict, required: bool = True) -> str:
                    f"(needs > {100 * RELATIVE_MARGIN:g} %)")
     if not e["reach"] >= MIN_REACH:
         why.append(f"it moves the image by {e['reach']:.2f} px at most (needs >= {MIN_REACH:g})")
-    verdict = "the input is returned unchanged" if required else "restored anyway (require_evidence=False)"
+    if not required:
+        verdict = "restored anyway (require_evidence=False)"
+    elif light:
+        verdict = f"a light restoration, with the estimated path at {100 * light:g} % of its length"
+    else:
+        verdict = "the input is returned unchanged"
     return f"little blur found, {verdict}: " + "; ".join(why)
 
 

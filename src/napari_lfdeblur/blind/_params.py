@@ -329,6 +329,12 @@ class BlindParams(JsonParams):
         (docs/blind.md, "What makes it robust"); otherwise return the input
         with a zero path. False: always restore with the path estimated
         (the evidence is still reported in ``BlindResult.info``).
+    light_restoration : float
+        In [0, 1]. When the evidence test finds little blur (with
+        ``require_evidence``), restore with the estimated path scaled by this
+        factor about its mean instead of returning the input: a light
+        restoration (docs/blind.md, "A light restoration"). 0 (the default):
+        return the input unchanged.
     """
 
     method: str = "alternating"
@@ -343,6 +349,7 @@ class BlindParams(JsonParams):
     joint: JointParams = field(default_factory=JointParams)
     final: DeconvolutionParams | None = field(default_factory=_default_final)
     require_evidence: bool = True
+    light_restoration: float = 0.0
 
     _what = "blind"
 
@@ -356,7 +363,9 @@ class BlindParams(JsonParams):
         if self.motion == "6dof" and self.method != "alternating":
             raise ValueError("motion='6dof' needs method='alternating'")
         _check(self, "BlindParams", ints={"n_control_points": 2, "n_times": 2, "final_n_times": 2},
-               nonneg=("max_extent",), bools=("require_evidence",))
+               nonneg=("max_extent", "light_restoration"), bools=("require_evidence",))
+        if self.light_restoration > 1:
+            raise ValueError(f"BlindParams.light_restoration must be in [0, 1]; got {self.light_restoration}")
         for name, cls in _NESTED.items():
             if not isinstance(getattr(self, name), cls):
                 raise TypeError(f"BlindParams.{name} must be a {cls.__name__} (or, in replace() and from_dict(), "
@@ -411,9 +420,12 @@ class BlindResult:
         Extra details (device used, restart scores, levels, ...), and the
         verdict of the evidence test (docs/blind.md, "What makes it
         robust"): ``'blur_found'`` (bool), ``'evidence'`` (dict of its
-        numbers), ``'message'`` (one line for people) and, when no
-        significant blur was found, ``'rejected_path'`` (the path estimated;
-        ``control_points`` is then zero and ``lightfield`` the input).
+        numbers), ``'message'`` (one line for people), ``'restoration'``
+        (``'full'``: with the path estimated; ``'light'``: with that path
+        scaled by ``params.light_restoration``; ``'none'``: the input
+        returned) and, when no significant blur was found,
+        ``'rejected_path'`` (the path estimated; ``control_points`` is then
+        the path restored with, zero when ``lightfield`` is the input).
     """
 
     lightfield: np.ndarray

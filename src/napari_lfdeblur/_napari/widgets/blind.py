@@ -7,7 +7,8 @@ fields below), ``motion`` (3-DOF translation, or 6-DOF with a camera
 rotation: an ``(n, 6)`` path, plotted in a second panel),
 ``n_control_points``, ``n_iter`` (path iterations),
 ``tv_iter`` (final TV iterations), ``restore_anyway`` (restore even when
-the evidence test finds little blur), ``device``, ``seed``,
+the evidence test finds little blur), ``light_restoration`` (the scale of
+the path of a light restoration then; 0: the input), ``device``, ``seed``,
 ``infinity_disparity``, ``edge_anisotropy``, ``preview_every`` and an
 optional ``true_path`` layer. While it runs:
 
@@ -69,9 +70,9 @@ def _iteration_field(params) -> tuple[str, str]:
 
 
 def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: int, edge_anisotropy: float,
-                 motion: str = "3dof", restore_anyway: bool = False):
+                 motion: str = "3dof", restore_anyway: bool = False, light_restoration: float = 0.0):
     """``BlindParams`` of a preset with the form's values (``tv_iter`` 0: no final solve;
-    ``restore_anyway``: ``require_evidence=False``).
+    ``restore_anyway``: ``require_evidence=False``; ``light_restoration``: its field).
 
     Raises
     ------
@@ -89,7 +90,7 @@ def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: in
     return params.replace(
         n_control_points=n_control_points, final=None if tv_iter == 0 else {"n_iter": tv_iter},
         latent={"edge_anisotropy": edge_anisotropy}, motion=motion, require_evidence=not restore_anyway,
-        **{stage: {field: n_iter}},
+        light_restoration=light_restoration, **{stage: {field: n_iter}},
     )
 
 
@@ -101,7 +102,7 @@ def _preset_values(preset: str) -> dict:
     stage, field = _iteration_field(p)
     return {"n_control_points": p.n_control_points, "n_iter": getattr(getattr(p, stage), field),
             "tv_iter": 0 if p.final is None else p.final.n_iter, "edge_anisotropy": p.latent.edge_anisotropy,
-            "motion": p.motion, "restore_anyway": not p.require_evidence}
+            "motion": p.motion, "restore_anyway": not p.require_evidence, "light_restoration": p.light_restoration}
 
 
 def _fields(viewer) -> list:
@@ -125,6 +126,9 @@ def _fields(viewer) -> list:
         CheckBox(name="restore_anyway", value=False, label="restore anyway",
                  tooltip="restore with the estimated path even when the data give little evidence of blur "
                  "(BlindParams.require_evidence=False; default: return the input unchanged then)"),
+        fspin("light_restoration", 0.0, 0.0, 1.0, 0.05, label="light restoration",
+              tooltip="when the data give little evidence of blur, restore with the estimated path scaled by "
+              "this factor instead of returning the input (BlindParams.light_restoration; 0: the input)"),
         device_choice(),
         spin("seed", 0, 0, 2**31 - 1, tooltip="random seed of the initial path"),
         fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
@@ -219,7 +223,8 @@ class BlindDeblurWidget(SolverWidget):
         f = self.form
         params = _make_params(f.preset.value, n_control_points=f.n_control_points.value, n_iter=f.n_iter.value,
                               tv_iter=f.tv_iter.value, edge_anisotropy=f.edge_anisotropy.value,
-                              motion=f.motion.value, restore_anyway=f.restore_anyway.value)
+                              motion=f.motion.value, restore_anyway=f.restore_anyway.value,
+                              light_restoration=f.light_restoration.value)
         settings = {"preset": f.preset.value, "device": f.device.value, "seed": f.seed.value,
                     "infinity_disparity": f.infinity_disparity.value}
         gen = iter_blind_deblur(lf, infinity_disparity=settings["infinity_disparity"], params=params,
