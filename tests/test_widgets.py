@@ -684,7 +684,9 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     assert [p.require_evidence for p in seen] == [True, False]
     assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["require_evidence"] is False
     assert w.form.light_restoration.value == 0.0  # the presets return the input on little blur
+    assert not w.form.light_restoration.enabled  # moot while restoring anyway
     w.form.restore_anyway.value = False
+    assert w.form.light_restoration.enabled
     w.form.light_restoration.value = 0.5
     w.run_and_wait(timeout=60)
     assert [p.light_restoration for p in seen] == [0.0, 0.0, 0.5] and seen[-1].require_evidence is True

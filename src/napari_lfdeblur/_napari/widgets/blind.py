@@ -160,6 +160,7 @@ class BlindDeblurWidget(SolverWidget):
         self.assemble(after=[heading("Path and loss"), caption, self.plot, self.loss_plot, self.epi])
         self.layer_combo.changed.connect(self._input_changed)
         self.form.preset.changed.connect(self._preset_changed)
+        self.form.restore_anyway.changed.connect(self._restore_anyway_changed)
         self._preset_changed()
         self._input_changed()
         self._next_draw = 0.0
@@ -177,6 +178,10 @@ class BlindDeblurWidget(SolverWidget):
             return
         for key, value in values.items():
             self.form[key].value = value
+
+    def _restore_anyway_changed(self, *_):
+        """A light restoration is for little blur found; restoring anyway makes it moot."""
+        self.form.light_restoration.enabled = not self.form.restore_anyway.value
 
     def _input_changed(self, *_):
         layer = self.layer_combo.value
