@@ -207,6 +207,39 @@ def test_generator_returns_result_and_close_stops_it():
     assert n == 3 and result.shape == lf.shape and result.dtype == np.float32
 
 
+def test_a_cancelled_tv_solve_stops_inside_the_iteration(monkeypatch):
+    import threading
+
+    from napari_lfdeblur import _tv_solvers
+    from napari_lfdeblur.progress import Cancelled, cancellable
+
+    lf = np.random.default_rng(5).random((3, 3, 8, 8)).astype(np.float32)
+    cp = linear_path(1.0, z=1.0)
+    stop = threading.Event()
+    calls = []
+    real = _tv_solvers.project_tv_dual
+
+    def counting(*args, **kwargs):  # one inner iteration of the TV prox; the 7th asks to stop
+        calls.append(stop.is_set())
+        if len(calls) == 7:
+            stop.set()
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(_tv_solvers, "project_tv_dual", counting)
+    gen = iter_deconvolve(lf, cp, n_times=4, n_iter=50, tol=0.0)  # 5 inner iterations per iteration
+    with cancellable(stop):
+        assert next(gen).iteration == 1 and len(calls) == 5
+        with pytest.raises(Cancelled):
+            next(gen)
+    # it stopped right after the inner iteration that set the event, inside iteration 2
+    assert len(calls) == 7 and not any(calls)
+    # outside a cancellable context the checks do nothing, though the event is still set
+    calls.clear()
+    records = []
+    out = run_to_completion(iter_deconvolve(lf, cp, n_times=4, n_iter=3, tol=0.0), records.append)
+    assert len(records) == 3 and len(calls) == 15 and out.shape == lf.shape
+
+
 def test_zero_weight_tv_fits_the_data():
     lf = np.random.default_rng(6).random((3, 3, 8, 8)).astype(np.float32)
     cp = linear_path(1.0, z=0.5)

@@ -423,6 +423,41 @@ def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, not
     assert not [n for n in notifications if n[0] == "error"], notifications
 
 
+def test_cancel_stops_inside_a_tv_iteration(make_napari_viewer, qtbot, lf, notifications, monkeypatch):
+    import time
+
+    from napari_lfdeblur import _tv_solvers
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+
+    calls = []
+    real = _tv_solvers.project_tv_dual
+
+    def slow(*args, **kwargs):  # each inner iteration of the TV prox takes 0.1 s: 5 of them per iteration
+        calls.append(time.perf_counter())
+        time.sleep(0.1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(_tv_solvers, "project_tv_dual", slow)
+    viewer = make_napari_viewer()
+    viewer.add_image(lf, name="b")
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    w.layer_combo.set_layer("b")
+    w.table.set_control_points([[-0.5, 0.2, 0.1], [0.6, -0.3, -0.1]])
+    w.form.method.value = "tv"
+    w.form.n_iter.value = 1000
+    w.run()
+    qtbot.waitUntil(lambda: len(calls) >= 7, timeout=TIMEOUT)  # inside the second iteration
+    at_cancel = len(calls)
+    w.cancel()
+    _wait_done(qtbot, w)
+    qtbot.wait(100)
+    # the inner iteration under way finishes, then the solve stops: it does not run to the iteration's end (10)
+    assert len(calls) <= at_cancel + 1 < 10
+    assert [layer.name for layer in viewer.layers] == ["b"] and w.last_result is None
+    assert ("info", "4D deconvolution: cancelled") in notifications
+    assert not [n for n in notifications if n[0] == "error"], notifications
+
+
 def test_blind_live_redraws_are_spaced_by_their_cost(make_napari_viewer, monkeypatch):
     import time
 

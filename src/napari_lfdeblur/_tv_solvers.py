@@ -14,6 +14,7 @@ import math
 import torch
 
 from .priors import divergence4d, gradient_norm_bound, project_tv_dual, sum_channels_
+from .progress import check_cancelled
 
 __all__ = ["TVProx", "add_gradient_", "tv_value", "iter_fista_tv"]
 
@@ -100,6 +101,7 @@ class TVProx:
         for _ in range(self.n_inner):
             add_gradient_(self.p, self._primal(v, mu, self.p, self.x), step, self.aw)
             project_tv_dual(self.p, 1.0, self.isotropic, self.norm, coupled_channels=self.coupled)
+            check_cancelled()
         return self._primal(v, mu, self.p, out)
 
 
@@ -125,6 +127,10 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
 
     The iterates live in buffers allocated once and reused: the ``x`` of a
     record is overwritten two iterations later (copy it to keep it).
+
+    Between two records it passes cancellation points
+    (:func:`~napari_lfdeblur.progress.check_cancelled`) after every blur
+    evaluation and every inner iteration of the proximal map.
     """
     tv = (isotropic, axis_weights, coupled)
     x = x0.clone() if box is None else x0.clamp(*box)
@@ -140,12 +146,14 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
     restarts = evaluations = 0
     for it in range(1, n_iter + 1):
         grad = op.adjoint(torch.sub(Ky, f, out=kwork))
+        check_cancelled()
         if grad.data_ptr() == kwork.data_ptr():  # an adjoint that returns its input: kwork is the prox's scratch
             grad = grad.clone()
         evaluations += 1
         while True:  # backtracking on the Lipschitz estimate (Beck & Teboulle)
             prox(torch.add(y, grad, alpha=-1.0 / lip, out=work), weight / lip, x_new)
             Kx_new = op.forward(x_new)
+            check_cancelled()
             d2 = _dist2(x_new, y, work)
             curv = _dist2(Kx_new, Ky, kwork) / max(d2, 1e-30)
             if curv <= lip * (1.0 + 1e-6) or d2 == 0.0:

@@ -5,7 +5,10 @@ yield :class:`Progress` records and *return* their result, so a script gets
 it from ``StopIteration.value`` (or simply calls the non-generator form), and
 napari's ``thread_worker`` emits it through its ``returned`` signal. Closing
 the generator (``gen.close()``, or quitting the worker) stops the work at the
-next ``yield``.
+next ``yield``. A caller that runs a solver in another thread can also stop
+it *between* two records: inside :func:`cancellable` with an event, the
+solvers' long iterations check the event at their cancellation points
+(:func:`check_cancelled`) and raise :class:`Cancelled` once it is set.
 
 How often a caller materialises the current light-field estimate is the
 caller's choice, not the solver's: a record carries a cheap ``estimate``
@@ -15,14 +18,16 @@ so many records (in the thread that runs the solver).
 
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["Progress", "run_to_completion", "with_previews"]
+__all__ = ["Cancelled", "Progress", "cancellable", "check_cancelled", "run_to_completion", "with_previews"]
 
 
 @dataclass
@@ -151,3 +156,52 @@ def _with_previews(gen, every, share, clock):
             yield record
     finally:
         gen.close()
+
+
+class Cancelled(Exception):
+    """Raised at a cancellation point of a solver whose run was cancelled (see :func:`cancellable`)."""
+
+
+_cancel = threading.local()
+
+
+@contextlib.contextmanager
+def cancellable(event: threading.Event):
+    """Within this context, :func:`check_cancelled` in this thread raises :class:`Cancelled` once ``event`` is set.
+
+    A solver generator runs in the thread that resumes it, so wrap each
+    ``next()`` that should be interruptible. Contexts nest; the innermost
+    event is the one checked. Outside any context the checks do nothing.
+
+    Examples
+    --------
+    >>> import threading
+    >>> stop = threading.Event()
+    >>> with cancellable(stop):
+    ...     check_cancelled()  # not set: nothing happens
+    ...     stop.set()
+    ...     try:
+    ...         check_cancelled()
+    ...     except Cancelled:
+    ...         print("cancelled")
+    cancelled
+    """
+    outer = getattr(_cancel, "event", None)
+    _cancel.event = event
+    try:
+        yield event
+    finally:
+        _cancel.event = outer
+
+
+def check_cancelled() -> None:
+    """A cancellation point: raise :class:`Cancelled` if this thread's :func:`cancellable` event is set.
+
+    Solvers call it inside iterations that take long between two progress
+    records (the TV solver: after each blur evaluation and each inner
+    iteration of its proximal map), so that a cancelled run stops within a
+    fraction of an iteration.
+    """
+    event = getattr(_cancel, "event", None)
+    if event is not None and event.is_set():
+        raise Cancelled("cancelled")

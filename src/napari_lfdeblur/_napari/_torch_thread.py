@@ -19,6 +19,8 @@ from __future__ import annotations
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
+from ..progress import cancellable
+
 __all__ = ["call", "iterate"]
 
 _lock = threading.Lock()
@@ -41,16 +43,26 @@ def call(fn, *args, **kwargs):
     return _thread().submit(fn, *args, **kwargs).result()
 
 
-def iterate(gen):
+def _step(gen, cancel):
+    if cancel is None:
+        return next(gen)
+    with cancellable(cancel):
+        return next(gen)
+
+
+def iterate(gen, cancel: threading.Event | None = None):
     """A generator that steps ``gen`` on the torch thread and yields its records here.
 
     It returns ``gen``'s result; closing it (a cancelled napari worker) closes
-    ``gen`` on the torch thread.
+    ``gen`` on the torch thread. With ``cancel``, each step runs inside
+    :func:`napari_lfdeblur.progress.cancellable`: once the event is set, the
+    step stops at the solver's next cancellation point and
+    :class:`~napari_lfdeblur.progress.Cancelled` is raised here.
     """
     try:
         while True:
             try:
-                record = call(next, gen)
+                record = call(_step, gen, cancel)
             except StopIteration as stop:
                 return stop.value
             yield record

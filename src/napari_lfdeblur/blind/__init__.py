@@ -203,7 +203,10 @@ def iter_blind_deblur(
     the generator is created; closing it stops the work at the next yield:
     records come after every conjugate-gradient iteration of the latent
     (one forward and one adjoint blur), every few Adam steps of the path
-    fit, every alternation and every iteration of the final solve.
+    fit, every alternation and every iteration of the final solve. Inside
+    :func:`napari_lfdeblur.progress.cancellable`, the final solve also stops
+    within its iterations once the event is set
+    (:class:`~napari_lfdeblur.progress.Cancelled` is raised).
 
     Yields
     ------

@@ -9,13 +9,16 @@ cadence, spaced by their cost (:data:`PREVIEW_SHARE`; previews are computed
 in the worker thread). Each progress
 record updates the progress bar (stage, iteration, loss, time left); the
 returned result becomes layers; an exception raised by the core becomes an
-error notification. *Cancel* quits the worker: the generator is closed at
-its next ``yield`` and nothing is added.
+error notification. *Cancel* quits the worker and sets the run's
+cancellation event: the solver stops at its next cancellation point
+(:func:`napari_lfdeblur.progress.check_cancelled`, inside long iterations) or
+at its next ``yield``, whichever comes first, and nothing is added.
 """
 
 from __future__ import annotations
 
 import logging
+import threading
 import time
 import traceback
 
@@ -23,7 +26,7 @@ import numpy as np
 from magicgui.widgets import Container, Label, ProgressBar, PushButton
 from napari.qt.threading import thread_worker
 
-from ...progress import with_previews
+from ...progress import Cancelled, with_previews
 from .._torch_thread import iterate
 from ..layers import LayerError, lightfield_from_layer
 from ._controls import LayerChoice, is_image, notify_error, notify_info, notify_warning
@@ -106,11 +109,14 @@ class _Failure:
         self.traceback = traceback.format_exc()
 
 
-def _guarded(make_generator, preview_every: int):
+def _guarded(make_generator, preview_every: int, cancel: threading.Event | None = None):
     """Run ``make_generator()``'s generator with previews every ``preview_every`` records, on the
-    plugin's torch thread (``_torch_thread``); turn an exception into a returned :class:`_Failure`."""
+    plugin's torch thread (``_torch_thread``), stoppable by ``cancel``; turn an exception into a
+    returned :class:`_Failure` (a cancelled run returns None)."""
     try:
-        result = yield from iterate(with_previews(make_generator(), preview_every, share=PREVIEW_SHARE))
+        result = yield from iterate(with_previews(make_generator(), preview_every, share=PREVIEW_SHARE), cancel)
+    except Cancelled:
+        return None
     except Exception as exc:  # noqa: BLE001 - reported to the user, with the traceback logged
         return _Failure(exc)
     return result
@@ -140,6 +146,8 @@ class SolverWidget(Container):
         self.viewer = napari_viewer
         self.worker = None
         self._cancelled = False
+        self._cancel_event = threading.Event()
+        self._cancel_reported = False
         self.last_result = None
         self.last_layers: list = []
         self.layer_combo = LayerChoice(napari_viewer, predicate=is_image, name="layer", label="input layer",
@@ -206,10 +214,12 @@ class SolverWidget(Container):
             notify_error(f"{self.title}: {exc}")
             return None
         self._cancelled = False
+        self._cancel_event = threading.Event()
+        self._cancel_reported = False
         self.last_result = None
         self.last_layers = []
         self.progress.start(f"{self.title}: starting...")
-        worker = thread_worker(_guarded, start_thread=False)(job, self.preview_every())
+        worker = thread_worker(_guarded, start_thread=False)(job, self.preview_every(), self._cancel_event)
         worker.yielded.connect(self._on_yielded)
         worker.returned.connect(self._on_returned)
         worker.aborted.connect(self._on_aborted)
@@ -249,10 +259,12 @@ class SolverWidget(Container):
         return list(self.last_layers)
 
     def cancel(self, *_):
-        """Ask the worker to stop at its next progress report; no result layer is added."""
+        """Ask the worker to stop at the solver's next cancellation point or progress report; no result
+        layer is added."""
         if self.worker is None:
             return
         self._cancelled = True
+        self._cancel_event.set()
         self.worker.quit()
         self.progress.status.value = f"{self.title}: cancelling..."
 
@@ -260,6 +272,7 @@ class SolverWidget(Container):
         """Stop a running worker when the widget goes away."""
         if self.worker is not None:
             self._cancelled = True
+            self._cancel_event.set()
             try:
                 self.worker.quit()
             except RuntimeError:  # pragma: no cover - Qt objects already deleted
@@ -295,13 +308,18 @@ class SolverWidget(Container):
         self.progress.finish(f"{self.title}: done")
 
     def _on_aborted(self):
+        self._cancel_reported = True
         self.cleanup()
         self.progress.finish(f"{self.title}: cancelled, nothing added", done=False)
         notify_info(f"{self.title}: cancelled")
 
     def _on_finished(self):
         if self._cancelled:
-            self.cleanup()
+            # stopped at a cancellation point, the worker returns without an 'aborted' signal
+            if self._cancel_reported:
+                self.cleanup()
+            else:
+                self._on_aborted()
         self.worker = None
         self.run_button.enabled = True
         self.cancel_button.enabled = False
