@@ -23,7 +23,7 @@ from napari_lfdeblur.progress import run_to_completion, with_previews
 from napari_lfdeblur.blur import BlurOperator, from_tensor, to_tensor
 from napari_lfdeblur import _noise
 from napari_lfdeblur.deconvolution import COLOUR_WEIGHT_FACTOR, NOISE_WEIGHT_FACTOR, estimate_noise_sigma
-from napari_lfdeblur.priors import divergence4d, gradient_norm_bound, project_tv_dual, tv4d
+from napari_lfdeblur.priors import divergence4d, gradient4d, gradient_norm_bound, project_tv_dual, tv4d
 from napari_lfdeblur.special_cases import inplane_matrix, inplane_psf
 
 
@@ -297,6 +297,44 @@ def test_tv_reaches_the_optimum_of_a_long_reference_run(d_inf, z, coupled):
     assert got < ref * (1 + 1e-3)
     assert records[-1].info["objective"] == pytest.approx(got, rel=1e-4)
     assert records[-1].info["blur_evaluations"] >= 40 and records[-1].info["weight"] == w
+
+
+@pytest.mark.parametrize("shape, isotropic, coupled, box", [
+    ((3, 4, 7, 5, 2), True, True, (0.0, 1.0)),
+    ((3, 4, 7, 5, 2), False, True, None),
+    ((2, 3, 9, 6), True, False, None),
+    ((3, 3, 8, 5), False, False, (0.0, 1.0)),
+    ((3, 2, 1, 5), True, False, None),
+])
+def test_tv_prox_in_blocks_of_rows_is_the_whole_field_gradient_projection(shape, isotropic, coupled, box):
+    import torch
+
+    from napari_lfdeblur._tv_solvers import TVProx
+
+    aw, mu, n_inner = (1.0, 0.5, 1.0, 2.0), 0.3, 4
+    rng = np.random.default_rng(3)
+    vs = [torch.as_tensor(rng.uniform(-0.5, 1.5, shape), dtype=torch.float64) for _ in range(2)]
+
+    def clip(x):
+        return x if box is None else x.clamp(*box)
+
+    # the reference: gradient projection on the dual written with the public operators, the dual kept
+    # between calls
+    p = [torch.zeros(shape, dtype=torch.float64) for _ in range(4)]
+    step = 1.0 / (mu * gradient_norm_bound(aw))
+    ref = []
+    for v in vs:
+        for _ in range(n_inner):
+            g = gradient4d(clip(v + mu * divergence4d(p, aw)), aw)
+            p = [a + step * b for a, b in zip(p, g)]
+            project_tv_dual(p, 1.0, isotropic, coupled_channels=coupled)
+        ref.append(clip(v + mu * divergence4d(p, aw)))
+    for rows in (None, 1, 2, 3, 100):  # blocks of 1, 2, 3 rows, the whole field, the default
+        prox = TVProx(vs[0], n_inner, isotropic, aw, box, coupled=coupled, rows=rows)
+        for v, r in zip(vs, ref):
+            out = torch.empty_like(v)
+            prox(v, mu, out)
+            np.testing.assert_allclose(out.numpy(), r.numpy(), atol=1e-12)
 
 
 def test_colour_tv_of_equal_channels_is_the_grey_tv_at_sqrt3_its_weight():

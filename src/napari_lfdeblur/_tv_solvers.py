@@ -13,21 +13,10 @@ import math
 
 import torch
 
-from .priors import divergence4d, gradient_norm_bound, project_tv_dual, sum_channels_
+from .priors import gradient_norm_bound, project_tv_dual, sum_channels_
 from .progress import check_cancelled
 
-__all__ = ["TVProx", "add_gradient_", "tv_value", "iter_fista_tv"]
-
-
-def add_gradient_(Y, x, alpha: float, axis_weights) -> None:
-    """``Y[a] += alpha * w_a * D_a x`` in place, without a temporary per axis."""
-    for axis in range(4):
-        n = x.shape[axis]
-        if n < 2 or axis_weights[axis] == 0:
-            continue
-        hi, lo = x.narrow(axis, 1, n - 1), x.narrow(axis, 0, n - 1)
-        y = Y[axis].narrow(axis, 0, n - 1)
-        y.add_(hi, alpha=alpha * axis_weights[axis]).sub_(lo, alpha=alpha * axis_weights[axis])
+__all__ = ["PROX_BLOCK_BYTES", "TVProx", "tv_value", "iter_fista_tv"]
 
 
 def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False) -> float:
@@ -62,6 +51,11 @@ def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False) -> float:
     return float((sum_channels_(acc) if coupled else acc).sqrt_().sum())
 
 
+#: on the CPU the proximal map works through the light field in blocks of rows of about this many bytes
+#: per array, so that each inner iteration's many passes over a block run in the processor's cache
+PROX_BLOCK_BYTES = 2 << 20
+
+
 class TVProx:
     """``prox(v, mu) = argmin_x 1/2 ||x - v||^2 + mu TV4(x)`` over the box, by gradient projection on its dual.
 
@@ -72,13 +66,23 @@ class TVProx:
     solution: with the slowly moving ``v`` of an outer iteration a few inner
     iterations suffice (FISTA's outer momentum carries the acceleration). All
     work happens in buffers allocated once; ``out`` receives the result.
-    ``scratch``, two tensors of ``like``'s shape that the caller does not
-    need during a call, hold the primal and the dual norm (their contents
-    are lost). ``coupled``: the colour TV (the last axis holds channels).
+    ``coupled``: the colour TV (the last axis holds channels).
+
+    An iteration sweeps the light field in blocks of ``rows`` rows (``y``):
+    the primal of a block and of the row after it, then the block's dual
+    step and projection. The primal row after a block is computed from the
+    dual before the block's update, and carried over to the next block, so
+    the sweep computes exactly what one pass over the whole field does.
+    ``rows`` defaults to all rows on a GPU (fewer, larger kernels) and to
+    blocks of about :data:`PROX_BLOCK_BYTES` per array on the CPU (each
+    block's passes then run in cache). ``scratch``, two tensors of
+    ``like``'s shape that the caller does not need during a call, are used
+    for the primal and the dual norm when the block is the whole field
+    (their contents are lost).
     """
 
-    def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch,
-                 coupled=False):
+    def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch=None,
+                 coupled=False, rows: int | None = None):
         self.n_inner = n_inner
         self.isotropic = isotropic
         self.coupled = coupled
@@ -86,12 +90,74 @@ class TVProx:
         self.box = box
         self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
         self.p = [torch.zeros_like(like) for _ in range(4)]
-        self.x, self.norm = scratch
+        Y = like.shape[2]
+        if rows is None:
+            row_bytes = max(1, like.narrow(2, 0, 1).numel() * like.element_size())
+            rows = Y if like.device.type != "cpu" else PROX_BLOCK_BYTES // row_bytes
+        self.rows = max(1, min(Y, int(rows)))
+        if self.rows >= Y - 1 and scratch is not None:
+            self.x, self.norm = scratch
+        else:
+            shape = list(like.shape)
+            shape[2] = min(Y, self.rows + 1)
+            self.x = like.new_empty(shape)
+            shape[2] = self.rows
+            self.norm = like.new_empty(shape)
 
-    def _primal(self, v, mu, q, out):
-        """``v + mu div(q)``, clipped to the box, into ``out``."""
-        x = divergence4d(q, self.aw, out=out.copy_(v), scale=mu, accumulate=True)
-        return x if self.box is None else x.clamp_(*self.box)
+    def _primal_rows(self, v, mu, r0, r1, out):
+        """``v + mu div(p)`` at the rows ``r0:r1``, clipped to the box, into ``out`` (those rows)."""
+        out.copy_(v.narrow(2, r0, r1 - r0))
+        for axis, g in enumerate(self.p):
+            n, w = g.shape[axis], mu * self.aw[axis]
+            if n == 1:
+                continue
+            # as divergence4d: div_i += w g_i for i <= n - 2, div_i -= w g_{i-1} for i >= 1
+            if axis != 2:
+                gr = g.narrow(2, r0, r1 - r0)
+                last = gr.narrow(axis, 0, n - 1)
+                out.narrow(axis, 0, n - 1).add_(last, alpha=w)
+                out.narrow(axis, 1, n - 1).sub_(last, alpha=w)
+                continue
+            a, b = r0, min(r1, n - 1)  # rows with a g_i term
+            if b > a:
+                out.narrow(2, 0, b - a).add_(g.narrow(2, a, b - a), alpha=w)
+            a = max(r0, 1)  # rows with a g_{i-1} term
+            if r1 > a:
+                out.narrow(2, a - r0, r1 - a).sub_(g.narrow(2, a - 1, r1 - a), alpha=w)
+        return out if self.box is None else out.clamp_(*self.box)
+
+    def _dual_rows(self, x, y0, n, step):
+        """The dual step at the rows ``y0:y0+n`` from the primal ``x`` at rows ``y0:y0+n`` (+ the next, if any)."""
+        Y = self.p[0].shape[2]
+        for axis, g in enumerate(self.p):
+            m, w = g.shape[axis], step * self.aw[axis]
+            if m < 2 or self.aw[axis] == 0:
+                continue
+            if axis != 2:
+                xs, gr = x.narrow(2, 0, n), g.narrow(2, y0, n)
+                gr.narrow(axis, 0, m - 1).add_(xs.narrow(axis, 1, m - 1), alpha=w).sub_(xs.narrow(axis, 0, m - 1),
+                                                                                        alpha=w)
+                continue
+            k = min(y0 + n, Y - 1) - y0  # rows with a forward difference
+            if k > 0:
+                g.narrow(2, y0, k).add_(x.narrow(2, 1, k), alpha=w).sub_(x.narrow(2, 0, k), alpha=w)
+        project_tv_dual([g.narrow(2, y0, n) for g in self.p], 1.0, self.isotropic, self.norm.narrow(2, 0, n),
+                        coupled_channels=self.coupled)
+
+    def _sweep(self, v, mu, step):
+        """One iteration of the dual gradient projection, block by block."""
+        Y, rows = v.shape[2], self.rows
+        for y0 in range(0, Y, rows):
+            n = min(rows, Y - y0)
+            hi = min(Y, y0 + n + 1)  # the primal is needed up to the row after the block
+            x = self.x.narrow(2, 0, hi - y0)
+            if y0 == 0:
+                self._primal_rows(v, mu, 0, hi, x)
+            else:  # the block's first row was computed by the previous block, before its dual update
+                x.narrow(2, 0, 1).copy_(self.x.narrow(2, rows, 1))
+                if hi > y0 + 1:
+                    self._primal_rows(v, mu, y0 + 1, hi, x.narrow(2, 1, hi - y0 - 1))
+            self._dual_rows(x, y0, n, step)
 
     def __call__(self, v: torch.Tensor, mu: float, out: torch.Tensor) -> torch.Tensor:
         if mu <= 0:
@@ -99,10 +165,13 @@ class TVProx:
             return out if self.box is None else out.clamp_(*self.box)
         step = 1.0 / (mu * self.lip)
         for _ in range(self.n_inner):
-            add_gradient_(self.p, self._primal(v, mu, self.p, self.x), step, self.aw)
-            project_tv_dual(self.p, 1.0, self.isotropic, self.norm, coupled_channels=self.coupled)
+            self._sweep(v, mu, step)
             check_cancelled()
-        return self._primal(v, mu, self.p, out)
+        Y = v.shape[2]
+        for y0 in range(0, Y, self.rows):
+            y1 = min(Y, y0 + self.rows)
+            self._primal_rows(v, mu, y0, y1, out.narrow(2, y0, y1 - y0))
+        return out
 
 
 def _dist2(a, b, buf) -> float:
@@ -130,7 +199,7 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
 
     Between two records it passes cancellation points
     (:func:`~napari_lfdeblur.progress.check_cancelled`) after every blur
-    evaluation and every inner iteration of the proximal map.
+    evaluation, every inner iteration of the proximal map and the objective.
     """
     tv = (isotropic, axis_weights, coupled)
     x = x0.clone() if box is None else x0.clamp(*box)
@@ -161,6 +230,7 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
             lip = 1.1 * curv
         del grad
         F_new, data = _objective(x_new, Kx_new, f, weight, tv, kwork, scratch)
+        check_cancelled()
         step = torch.sub(x_new, x, out=work)  # x_new - x
         # adaptive restart: momentum is dropped when the objective rose or the step turned back
         if it > 1 and (F_new > F or float(torch.vdot(torch.sub(y, x_new, out=spare).view(-1), step.view(-1))) > 0):
