@@ -118,16 +118,18 @@ class GramLoss:
     with ``G_t``, ``b_t`` the Gram matrix and correlation of the shifted
     latent gradients at a subset of pixels of tile ``t``: built once per
     latent (:meth:`set_latent`), after which a path step costs a few small
-    products.
+    products. The shifts only re-index the views, so ``G_t`` and ``b_t``
+    are sums of entries of the ``VU x VU`` Gram matrices of the views
+    (latent with latent, latent with data), which are all that is computed
+    over the pixels.
     """
 
-    def __init__(self, f, n_pixels, rng, T, box_xy, box_z, tiles, chunk=256, weight=None):
+    def __init__(self, f, n_pixels, rng, T, box_xy, box_z, tiles, weight=None):
         V, U, Y, X, _ = f.shape
         self.V, self.U, self.Y, self.X, self.T = V, U, Y, X, T
         self.R = int(min(max(V, U) - 1, math.floor(box_xy + box_z) + 1))
         R = self.R
         self.nO = 2 * R + 1
-        self.chunk = chunk
         dev, dt = f.device, f.dtype
         gy, gx = gradient_yx(f)
         score = (gy * gy + gx * gx).sum(dim=(0, 1, 4))[: Y - 1, : X - 1].sqrt().cpu().double().numpy()
@@ -150,21 +152,12 @@ class GramLoss:
         self.F = torch.cat([gy[:, :, self.ys, self.xs, 0], gx[:, :, self.ys, self.xs, 0]], dim=0)
         self.F = self.F.permute(2, 0, 1).reshape(len(sel), -1)
         offs = torch.arange(-R, R + 1, device=dev)
-        self.vidx = (torch.arange(V, device=dev)[None, :] + offs[:, None]).clamp(0, V - 1)  # (nO, V)
-        self.uidx = (torch.arange(U, device=dev)[None, :] + offs[:, None]).clamp(0, U - 1)
+        vidx = (torch.arange(V, device=dev)[None, :] + offs[:, None]).clamp(0, V - 1)  # (nO, V)
+        uidx = (torch.arange(U, device=dev)[None, :] + offs[:, None]).clamp(0, U - 1)
+        # view read by offset o = (ov, ou) for view s = (v, u): (clamp(v + ov), clamp(u + ou)), flat, (nO*nO, VU)
+        self.shifted = (vidx[:, None, :, None] * U + uidx[None, :, None, :]).reshape(self.nO * self.nO, V * U)
         self.G = None
         self.scale = 1.0 / max(1, self.F.numel())
-
-    def _chunks(self, Lg):
-        """``(m0, m1, Z)`` over chunks of the pixels, ``Z`` (nO*nO, m, 2VU) the shifted samples of ``Lg``."""
-        nO, M = self.nO, self.ys.shape[0]
-        for m0 in range(0, M, self.chunk):
-            m1 = min(M, m0 + self.chunk)
-            part = Lg[..., m0:m1]  # (2, V, U, m)
-            # Z[ov, ou, m, (2, V, U)]: the samples at (clamp(v + ov), clamp(u + ou))
-            Zv = part[:, self.vidx]  # (2, nO, V, U, m)
-            Z = Zv[:, :, :, self.uidx]  # (2, nO_v, V, nO_u, U, m)
-            yield m0, m1, Z.permute(1, 3, 5, 0, 2, 4).reshape(nO * nO, m1 - m0, -1)  # (O, m, 2VU)
 
     @torch.no_grad()
     def set_latent(self, latent, cp=None, robust: float = 0.0, sigma=0.0):
@@ -174,29 +167,30 @@ class GramLoss:
         ``1 / (1 + r / (robust * median(r)))``, ``r`` its residual under ``cp``.
         """
         gy, gx = gradient_yx(gauss_yx(latent, sigma))
-        Lg = torch.stack([gy[:, :, self.ys, self.xs, 0], gx[:, :, self.ys, self.xs, 0]], dim=0)  # (2, V, U, M)
-        nO, M = self.nO, self.ys.shape[0]
-        G = torch.zeros(self.n_tiles, nO * nO, nO * nO, dtype=latent.dtype, device=latent.device)
-        b = torch.zeros(self.n_tiles, nO * nO, dtype=latent.dtype, device=latent.device)
+        M, VU, I = self.ys.shape[0], self.V * self.U, self.shifted
+        L = torch.stack([gy[:, :, self.ys, self.xs, 0], gx[:, :, self.ys, self.xs, 0]], dim=0).reshape(2, VU, M)
+        F = self.F.reshape(M, 2, VU).permute(1, 2, 0)  # (2, VU, M), as L
         w = torch.ones(M, dtype=latent.dtype, device=latent.device)
         if cp is not None and robust > 0:
             K = self.kernels(torch.as_tensor(np.asarray(cp), dtype=latent.dtype, device=latent.device))
-            res = torch.empty(M, dtype=latent.dtype, device=latent.device)
-            for m0, m1, Z in self._chunks(Lg):
-                pred = torch.einsum("omj,mo->mj", Z, K[self.pix_tile[m0:m1]])
-                res[m0:m1] = ((pred - self.F[m0:m1]) ** 2).sum(dim=1)
+            Kp = K[self.pix_tile]  # (M, nO*nO): each pixel's kernel
+            pred = torch.zeros_like(L)
+            for o in (K != 0).any(dim=0).nonzero().squeeze(1).tolist():
+                pred.addcmul_(L[:, I[o]], Kp[:, o])
+            res = ((pred - F) ** 2).sum(dim=(0, 1))
             scale = robust * res.median().clamp_min(1e-20)
             w = 1.0 / (1.0 + res / scale)
-        for m0, m1, Z in self._chunks(Lg):
-            sw = w[m0:m1].sqrt()
-            Zw = Z * sw[None, :, None]
-            Fw = self.F[m0:m1] * sw[:, None]  # (m, 2VU) in (2, V, U) order
-            tiles = self.pix_tile[m0:m1]
-            for t in torch.unique(tiles).tolist():
-                sel = (tiles == t).nonzero().squeeze(1)
-                Zt = Zw[:, sel].reshape(nO * nO, -1)
-                G[t] += Zt @ Zt.T
-                b[t] += Zt @ Fw[sel].reshape(-1)
+        nO2 = I.shape[0]
+        G = torch.zeros(self.n_tiles, nO2, nO2, dtype=latent.dtype, device=latent.device)
+        b = torch.zeros(self.n_tiles, nO2, dtype=latent.dtype, device=latent.device)
+        diag = torch.arange(VU, device=latent.device)
+        for t in torch.unique(self.pix_tile).tolist():
+            sel = (self.pix_tile == t).nonzero().squeeze(1)
+            Lw = L[:, :, sel] * w[sel]
+            C = torch.einsum("csm,cqm->sq", Lw, L[:, :, sel])  # the views' Gram matrix, (VU, VU)
+            D = torch.einsum("csm,cqm->sq", Lw, F[:, :, sel])  # latent views against data views
+            G[t] = C[I[:, None, :], I[None, :, :]].sum(dim=-1)
+            b[t] = D[I, diag[None, :]].sum(dim=-1)
         self.G, self.b = G, b
 
     def kernels(self, cp):
