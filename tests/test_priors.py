@@ -193,3 +193,17 @@ def test_sparse_gradient_prior_rejects_a_non_positive_eps():
 
     with pytest.raises(ValueError, match="eps"):
         sparse_gradient_prior(torch.zeros(2, 2, 3, 3), 0.0)
+
+
+@pytest.mark.parametrize("weights", [None, (0.5, 0.25, 1.0, 2.0), (0.0, 0.0, 1.0, 1.0)])
+def test_laplacian_is_minus_the_divergence_of_the_gradient(weights):
+    from napari_lfdeblur.priors import laplacian4d
+
+    L = torch.as_tensor(np.random.default_rng(4).random((3, 4, 6, 5, 2)))
+    ref = -divergence4d(gradient4d(L, weights), weights)
+    np.testing.assert_allclose(laplacian4d(L, weights).numpy(), ref.numpy(), atol=1e-12)
+    out = torch.full_like(L, 7.0)  # overwritten, not added to
+    assert laplacian4d(L, weights, out=out) is out
+    np.testing.assert_allclose(out.numpy(), ref.numpy(), atol=1e-12)
+    # positive semi-definite: <L, lap L> = ||grad L||^2
+    np.testing.assert_allclose(float((L * ref).sum()), sum(float((g * g).sum()) for g in gradient4d(L, weights)))

@@ -23,6 +23,7 @@ __all__ = [
     "AXES",
     "gradient4d",
     "divergence4d",
+    "laplacian4d",
     "gradient_magnitude4d",
     "tv4d",
     "project_tv_dual",
@@ -118,6 +119,41 @@ def divergence4d(G: Sequence[torch.Tensor], axis_weights: Sequence[float] | None
         raise ValueError("divergence4d: accumulate=True needs out")
     w = tuple(scale * a for a in _weights(axis_weights))
     return _divergence(G, range(4), w, out, accumulate)
+
+
+def laplacian4d(L: torch.Tensor, axis_weights: Sequence[float] | None = None,
+                out: torch.Tensor | None = None) -> torch.Tensor:
+    """``-divergence4d(gradient4d(L, w), w)``: the weighted 4D Laplacian with Neumann boundaries.
+
+    Computed without the four gradient components: one difference buffer is
+    reused along every axis.
+
+    Parameters
+    ----------
+    L : torch.Tensor, shape (V, U, Y, X, ...)
+    axis_weights : sequence of 4 floats, optional
+        The weights of :func:`gradient4d`; each axis's term is scaled by the
+        square of its weight (an axis of weight 0 is skipped).
+    out : torch.Tensor, optional
+        Written in place and returned (``L``'s shape, dtype and device).
+
+    Returns
+    -------
+    torch.Tensor, ``L``'s shape
+        ``D^T W^2 D L``, positive semi-definite in ``L``.
+    """
+    w = _weights(axis_weights)
+    _check(L)
+    out = torch.zeros_like(L) if out is None else out.zero_()
+    diff = torch.empty_like(L)
+    for axis in range(4):
+        n = L.shape[axis]
+        if n < 2 or w[axis] == 0:
+            continue
+        d = torch.sub(L.narrow(axis, 1, n - 1), L.narrow(axis, 0, n - 1), out=diff.narrow(axis, 0, n - 1))
+        out.narrow(axis, 0, n - 1).sub_(d, alpha=w[axis] ** 2)
+        out.narrow(axis, 1, n - 1).add_(d, alpha=w[axis] ** 2)
+    return out
 
 
 def _divergence(G: Sequence[torch.Tensor], axes, w, out=None, accumulate=False) -> torch.Tensor:

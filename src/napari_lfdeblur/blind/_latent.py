@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from ..blur import BlurOperator
-from ..priors import divergence4d, divergence_yx, gradient4d, gradient_yx
+from ..priors import divergence4d, divergence_yx, gradient4d, gradient_yx, laplacian4d
 from ._params import LatentParams
 
 __all__ = ["cg", "n_hqs_steps", "difference_pair", "l0_latent", "edge_sigmas", "gauss_yx", "EdgeBlurred"]
@@ -85,6 +85,8 @@ def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0
            L0-Regularized Intensity and Gradient Prior", CVPR 2014.
     """
     grad, div = difference_pair(p.angular_weight)
+    # div(grad(.)) of the quadratic step without the gradient components: -laplacian4d
+    lap_weights = (p.angular_weight, p.angular_weight, 1.0, 1.0) if p.angular_weight > 0 else (0.0, 0.0, 1.0, 1.0)
     Ktf = op.adjoint(f)
     x = x0
     beta = 2.0 * lam
@@ -96,7 +98,7 @@ def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0
         rhs = Ktf - beta * div(g)
 
         def apply_A(z, beta=beta):
-            return op.adjoint(op.forward(z)) - beta * div(grad(z))
+            return torch.add(op.adjoint(op.forward(z)), laplacian4d(z, lap_weights), alpha=beta)
 
         x = yield from cg(apply_A, rhs, x, p.n_cg)
         if beta >= p.hqs_beta_max:
