@@ -56,11 +56,16 @@ def n_hqs_steps(lam: float, p: LatentParams) -> int:
     return n
 
 
+def _axis_weights(angular_weight: float) -> tuple[float, float, float, float]:
+    """The regulariser's weights of ``(v, u, y, x)``: the angular axes weighted, or left out when 0."""
+    a = max(float(angular_weight), 0.0)
+    return (a, a, 1.0, 1.0)
+
+
 def difference_pair(angular_weight: float):
     """``(grad, div)`` of the latent's regulariser: 4D with weighted angular axes, or spatial only."""
-    a = angular_weight
-    if a > 0:
-        aw = (a, a, 1.0, 1.0)
+    if angular_weight > 0:
+        aw = _axis_weights(angular_weight)
         return (lambda z: gradient4d(z, aw)), (lambda g: divergence4d(g, aw))
     return gradient_yx, (lambda g: divergence_yx(*g))
 
@@ -86,7 +91,7 @@ def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0
     """
     grad, div = difference_pair(p.angular_weight)
     # div(grad(.)) of the quadratic step without the gradient components: -laplacian4d
-    lap_weights = (p.angular_weight, p.angular_weight, 1.0, 1.0) if p.angular_weight > 0 else (0.0, 0.0, 1.0, 1.0)
+    lap_weights = _axis_weights(p.angular_weight)
     Ktf = op.adjoint(f)
     x = x0
     beta = 2.0 * lam
