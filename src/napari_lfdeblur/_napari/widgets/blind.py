@@ -24,7 +24,8 @@ optional ``true_path`` layer. While it runs:
 - the loss curve.
 
 Cancel stops the solver at its next progress report (in the final stage,
-within the current iteration), removes the preview layers and adds nothing. When it finishes, the previews are replaced by
+within the current iteration), removes the preview layers and adds nothing.
+When it finishes, the previews are replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
 timings, package version, and the verdict of the evidence test in
 ``blur_evidence``) and ``'<source> estimated path'``. When the data show
