@@ -22,8 +22,9 @@ For every case: the blurred input's PSNR; then, for the default solver
 per-view 2D baseline, the PSNR, its gain over the input and the time; and
 for the two light-field solvers the blur mismatch of their path on the full
 6-DOF model, and that of the path they estimated (the same path, or the one
-their evidence test rejected when they returned the input). The table goes to ``docs/benchmarks/blind_rotation_eval.md``
-(or ``--out``), rewritten after every case.
+their evidence test rejected when they returned the input). The table goes
+to ``docs/benchmarks/blind_rotation_eval.md`` (or ``--out``), rewritten
+after every case.
 """
 
 from __future__ import annotations
@@ -152,7 +153,8 @@ def evaluate(spec, device, quick, degrees=DEGREES) -> dict:
 
 def _line(r) -> str:
     return (f"| {r['case']} | {r['group']} | {r['motion']} | {r['d_inf']:+.1f} | {r['rotation_mrad']:.1f} | "
-            f"{r['input']:.2f} | {r['3dof']:+.2f} | {r['3dof_mismatch']:.2f} | {r['3dof_found']:.2f} | {r['3dof_s']:.0f} | "
+            f"{r['input']:.2f} | {r['3dof']:+.2f} | {r['3dof_mismatch']:.2f} | {r['3dof_found']:.2f} | "
+            f"{r['3dof_s']:.0f} | "
             f"{r['6dof']:+.2f} | {r['6dof_mismatch']:.2f} | {r['6dof_found']:.2f} | {r['6dof_s']:.0f} | "
             f"{r['baseline2d']:+.2f} |")
 
@@ -185,7 +187,7 @@ def write(rows, args, argv, device):
         "",
         "Gains are PSNR over the blurred input (dB, 8-px border excluded); *mismatch* is the blur mismatch of "
         "the path a solver restored with on the full 6-DOF model (0 is perfect, 1 as bad as no blur; "
-        "docs/model.md, *Judging an estimate*), zero when it returned the input; *estimate's mismatch* is that of "
+        "docs/model.md, *Judging an estimate*; 1.00 when it returned the input); *estimate's mismatch* is that of "
         "the path it estimated, also when its evidence test rejected it; times in seconds. The 3-DOF solver is "
         "the default (`motion='3dof'`).",
         "",
