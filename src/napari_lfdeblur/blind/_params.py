@@ -181,7 +181,7 @@ class PathFitParams(JsonParams):
     n_levels: int = 1
     min_size: int = 24
     max_size: int = 0
-    n_outer: int = 6
+    n_outer: int = 2
     n_restarts: int = 4
     init_length: float = 1.5
     lr: float = 0.05
@@ -198,7 +198,7 @@ class PathFitParams(JsonParams):
     z_box: float = 0.5
     try_mirror: bool = True
     estimate_z: bool = True
-    z_outer: int = 3
+    z_outer: int = 1
 
     _what = "blind path fit"
 
