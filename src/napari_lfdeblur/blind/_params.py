@@ -119,7 +119,9 @@ class PathFitParams(JsonParams):
         finer levels are skipped (0: up to full resolution). The path means
         the same at every resolution, so this trades little accuracy for time.
     n_outer : int
-        Maximum latent/path alternations per level.
+        Maximum latent/path alternations per level. Every alternation tends
+        to lengthen the path (the latent it fits is sharper than the scene),
+        so the default is short (docs/blind.md, *Stopping*).
     n_restarts : int
         Initial paths tried on the coarsest level (linear paths of length
         ``init_length`` views in evenly spread directions), the best kept.
