@@ -3,7 +3,7 @@
 Usage::
 
     xvfb-run -a python benchmarks/bench_widget_fullres.py [--scene synthetic|illum] [--device cpu]
-        [--waits 10 60] [--rounds 2] [--out PATH]
+        [--cancel-in path final] [--cancel-after 5] [--rounds 2] [--out PATH]
 
 The scene is ``bench_fullres``'s full-size case (``synthetic``: the rendered 9 x 9 x 376 x 541 x 3
 scene; ``illum``: the whole Lytro Illum capture), blurred by its known path with ``d_inf = 0``, noise
@@ -20,8 +20,10 @@ scene; ``illum``: the whole Lytro Illum capture), blurred by its known path with
    (``--rounds`` of each, alternating; the other figures are the worst round's). All torch work of
    this script runs on the plugin's torch thread, as in a napari session: the script's run too, so
    that the process keeps one OpenMP thread pool, as a script of its own would;
-4. presses Cancel after each of ``--waits`` seconds and reports how long the run took to stop and
-   which layers were left.
+4. starts the run again once for each stage of ``--cancel-in`` (``path``: the path stage, run on a
+   window; ``final``: the final solve over the whole light field), presses Cancel ``--cancel-after``
+   seconds after that stage began, and reports how long the run took to stop and which layers were
+   left.
 
 The table goes to ``docs/benchmarks/bench_widget_fullres.md`` (or ``--out``).
 """
@@ -126,23 +128,32 @@ def script_run(lf, params, device: str) -> float:
     return time.perf_counter() - t0
 
 
-def cancels(widget, viewer, waits) -> list[str]:
+def current_stage(widget) -> str:
+    return widget.progress.status.value.split(":")[0]
+
+
+def cancels(widget, viewer, stages, after: float) -> list[str]:
+    from qtpy.QtWidgets import QApplication
+
     rows = []
-    for wait in waits:
+    for name in stages:
         if widget.run() is None:
             raise SystemExit("the run did not start")
-        wait_while_running(widget, wait)
+        while widget.is_running and not current_stage(widget).startswith(name):
+            QApplication.processEvents()
+            time.sleep(0.005)
+        wait_while_running(widget, after)
         if not widget.is_running:
-            rows.append(f"| Cancel after {wait:.0f} s | the run had finished |")
+            rows.append(f"| Cancel {after:g} s into the *{name}* stage | the run had finished |")
             continue
-        stage = widget.progress.status.value.split(":")[0]
+        stage = current_stage(widget)
         widget.cancel()
         t1 = time.perf_counter()
         wait_while_running(widget)
         latency = time.perf_counter() - t1
         left = ", ".join(layer.name for layer in viewer.layers)
-        rows.append(f"| Cancel after {wait:.0f} s (stage *{stage}*) | stopped {latency:.2f} s later; layers "
-                    f"left: {left} |")
+        rows.append(f"| Cancel {after:g} s into the *{name}* stage (*{stage}*) | stopped {latency:.2f} s later; "
+                    f"layers left: {left} |")
     return rows
 
 
@@ -150,8 +161,10 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="synthetic", choices=("synthetic", "illum"))
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda (default cpu)")
-    parser.add_argument("--waits", type=float, nargs="*", default=[10.0, 60.0],
-                        help="seconds before each Cancel (default 10 60)")
+    parser.add_argument("--cancel-in", nargs="*", default=["path", "final"], choices=("path", "final"),
+                        help="stages to cancel a run in, one run each (default path final)")
+    parser.add_argument("--cancel-after", type=float, default=5.0,
+                        help="seconds into the stage before Cancel (default 5)")
     parser.add_argument("--rounds", type=int, default=2, help="widget and script runs, alternating (default 2)")
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
@@ -187,7 +200,7 @@ def main(argv=None):
         print(f"script: {script_s[-1]:.1f} s", file=sys.stderr, flush=True)
     run = {key: max(r[key] for r in runs) for key in runs[0]}  # the worst of the rounds
     run["seconds"], script_s = sum(r["seconds"] for r in runs), sum(script_s)
-    cancel_rows = cancels(widget, viewer, args.waits)
+    cancel_rows = cancels(widget, viewer, args.cancel_in, args.cancel_after)
     viewer.close()
 
     rows = [
