@@ -3,7 +3,7 @@
 Usage::
 
     xvfb-run -a python benchmarks/bench_widget_fullres.py [--scene synthetic|illum] [--device cpu]
-        [--cancel-in path final] [--cancel-after 5] [--rounds 2] [--out PATH]
+        [--cancel-in path final] [--cancel-after 2] [--rounds 2] [--out PATH]
 
 The scene is ``bench_fullres``'s full-size case (``synthetic``: the rendered 9 x 9 x 376 x 541 x 3
 scene; ``illum``: the whole Lytro Illum capture), blurred by its known path with ``d_inf = 0``, noise
@@ -12,8 +12,8 @@ scene; ``illum``: the whole Lytro Illum capture), blurred by its known path with
 1. opens the file with the plugin's reader (timed);
 2. runs *Blind deblur* with the default preset and *restore anyway* ticked (so that the final stage
    runs at full size), the widget's default preview cadence, to the end, while a Qt timer that should
-   fire every 20 ms measures how long Qt's thread was kept from running (the longest gap, and the
-   99th percentile);
+   fire every 20 ms measures how long Qt's thread was kept from running (the longest gap, with the
+   widget's status line before and after it, and the 99th percentile);
 3. reports the previews (how many, Qt-thread time per preview), the peak resident memory above the
    level before the run (in units of the light field's size), whether the result layer holds the
    solver's array itself (no copy), and the run's time against the same solver iterated by a script
@@ -48,15 +48,20 @@ TICK_MS = 20
 
 
 class TickGaps:
-    """Gaps between the firings of a Qt timer that should fire every ``TICK_MS`` ms."""
+    """Gaps between the firings of a Qt timer that should fire every ``TICK_MS`` ms, and what
+    ``label()`` (the widget's status line) said at each firing."""
 
-    def __init__(self):
+    def __init__(self, label):
         from qtpy.QtCore import QTimer
 
-        self.times = []
+        self.times, self.labels, self.label = [], [], label
         self.timer = QTimer()
         self.timer.setInterval(TICK_MS)
-        self.timer.timeout.connect(lambda: self.times.append(time.perf_counter()))
+        self.timer.timeout.connect(self._tick)
+
+    def _tick(self):
+        self.times.append(time.perf_counter())
+        self.labels.append(self.label())
 
     def __enter__(self):
         self.timer.start()
@@ -67,6 +72,13 @@ class TickGaps:
 
     def gaps_ms(self) -> np.ndarray:
         return np.diff(self.times) * 1000 if len(self.times) > 1 else np.zeros(1)
+
+    def longest_between(self) -> str:
+        """The status lines before and after the longest gap."""
+        if len(self.times) < 2:
+            return "-"
+        i = int(np.argmax(self.gaps_ms()))
+        return f"{self.labels[i]!r} -> {self.labels[i + 1]!r}"
 
 
 def blurred_file(scene: str, folder: Path) -> Path:
@@ -103,7 +115,7 @@ def wait_while_running(widget, seconds: float | None = None) -> None:
 
 def full_run(widget, layer, nbytes: int) -> dict:
     calls = timed_on_progress(widget)
-    with PeakMemory("cpu") as mem, TickGaps() as ticks:
+    with PeakMemory("cpu") as mem, TickGaps(lambda: widget.progress.status.value) as ticks:
         t0 = time.perf_counter()
         if widget.run() is None:
             raise SystemExit("the run did not start (see the notification above)")
@@ -115,6 +127,7 @@ def full_run(widget, layer, nbytes: int) -> dict:
     return {"seconds": seconds, "records": len(calls), "previews": len(preview_s),
             "preview_ms": 1000 * float(np.median(preview_s)) if preview_s else float("nan"),
             "gap_max_ms": float(gaps.max()), "gap_p99_ms": float(np.percentile(gaps, 99)),
+            "gap_where": ticks.longest_between(),
             "memory_x": mem.delta_mib * 2**20 / nbytes,
             "no_copy": bool(np.shares_memory(out.data, widget.last_result.lightfield))}
 
@@ -163,8 +176,8 @@ def main(argv=None):
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda (default cpu)")
     parser.add_argument("--cancel-in", nargs="*", default=["path", "final"], choices=("path", "final"),
                         help="stages to cancel a run in, one run each (default path final)")
-    parser.add_argument("--cancel-after", type=float, default=5.0,
-                        help="seconds into the stage before Cancel (default 5)")
+    parser.add_argument("--cancel-after", type=float, default=2.0,
+                        help="seconds into the stage before Cancel (default 2)")
     parser.add_argument("--rounds", type=int, default=2, help="widget and script runs, alternating (default 2)")
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
@@ -198,7 +211,8 @@ def main(argv=None):
             viewer.layers.remove(name)
         script_s.append(call(script_run, lf, params, args.device))  # one thread, as a script's
         print(f"script: {script_s[-1]:.1f} s", file=sys.stderr, flush=True)
-    run = {key: max(r[key] for r in runs) for key in runs[0]}  # the worst of the rounds
+    run = {key: max(r[key] for r in runs) for key in runs[0] if key != "gap_where"}  # the worst of the rounds
+    run["gap_where"] = max(runs, key=lambda r: r["gap_max_ms"])["gap_where"]
     run["seconds"], script_s = sum(r["seconds"] for r in runs), sum(script_s)
     cancel_rows = cancels(widget, viewer, args.cancel_in, args.cancel_after)
     viewer.close()
@@ -208,8 +222,8 @@ def main(argv=None):
         f"| open the `.npz` with the plugin's reader ({lf.nbytes / 2**20:.0f} MiB) | {open_s:.2f} s |",
         f"| *Blind deblur*, to the end, {args.rounds} runs | {run['seconds']:.1f} s; a script iterating the "
         f"solver: {script_s:.1f} s ({100 * (run['seconds'] / script_s - 1):+.1f} %) |",
-        f"| Qt's thread kept from running | longest {run['gap_max_ms']:.0f} ms, 99th percentile "
-        f"{run['gap_p99_ms']:.0f} ms (timer every {TICK_MS} ms) |",
+        f"| Qt's thread kept from running | longest {run['gap_max_ms']:.0f} ms (status before and after: "
+        f"{run['gap_where']}), 99th percentile {run['gap_p99_ms']:.0f} ms (timer every {TICK_MS} ms) |",
         f"| progress records; light-field previews | {run['records']}; {run['previews']}, "
         f"{run['preview_ms']:.0f} ms each in Qt's thread (median) |",
         f"| peak memory above the level before the run | {run['memory_x']:.1f}x the light field |",
