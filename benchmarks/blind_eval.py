@@ -87,6 +87,23 @@ class Case:
         return self.spec.infinity_disparity
 
 
+def dev_study_parser(doc: str) -> argparse.ArgumentParser:
+    """A parser with the arguments of the studies in ``benchmarks/dev/`` on the development split:
+    ``--cases`` (comma-separated names, default all) and ``--threads`` (torch's, default 2)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--cases", default="", help="comma-separated case names (default: the whole dev split)")
+    ap.add_argument("--threads", type=int, default=2)
+    return ap
+
+
+def dev_study_cases(args) -> list:
+    """Set torch's threads to ``args.threads``; return the development cases ``args.cases`` names."""
+    import torch
+
+    torch.set_num_threads(args.threads)
+    return select_cases("dev", [n for n in args.cases.split(",") if n] or None)[0]
+
+
 def make_case(spec: eval_set.CaseSpec, quick: bool = False) -> Case:
     """Render a case: its sharp light field, true path and blurred, noisy input."""
     sharp = eval_set.sharp_lightfield(spec, quick)

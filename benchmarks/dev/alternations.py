@@ -19,25 +19,20 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import blind_eval as ev  # noqa: E402  (benchmarks/blind_eval.py)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", default="", help="comma-separated case names (default: the whole dev split)")
+    ap = ev.dev_study_parser(__doc__)
     ap.add_argument("--schedules", default="1:1,2:1,6:3", help="comma-separated n_outer:z_outer pairs")
-    ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args(argv)
-    torch.set_num_threads(args.threads)
 
     from napari_lfdeblur.blind import BlindParams, blind_deblur
     from napari_lfdeblur.metrics import path_error
@@ -45,7 +40,7 @@ def main(argv=None):
 
     base = BlindParams.preset("default").replace(require_evidence=False, final=None)
     schedules = [tuple(int(n) for n in s.split(":")) for s in args.schedules.split(",") if s]
-    specs, _ = ev.select_cases("dev", [n for n in args.cases.split(",") if n] or None)
+    specs = ev.dev_study_cases(args)
     stats = {s: ([], [], []) for s in schedules}  # mismatch, mismatch at half length, seconds
 
     def extent(cp):

@@ -17,25 +17,20 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import blind_eval as ev  # noqa: E402  (benchmarks/blind_eval.py)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", default="", help="comma-separated case names (default: the whole dev split)")
+    ap = ev.dev_study_parser(__doc__)
     ap.add_argument("--scales", default="0.25,0.5,0.75,1", help="scales of the estimated path to try")
-    ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args(argv)
-    torch.set_num_threads(args.threads)
 
     from napari_lfdeblur.blind import BlindParams, blind_deblur
     from napari_lfdeblur.deconvolution import deconvolve
@@ -45,7 +40,7 @@ def main(argv=None):
     scales = [float(s) for s in args.scales.split(",") if s]
     gains = {s: [] for s in scales}
     print("case | group | d_inf | noise | scale | gain dB | blur mismatch")
-    specs, _ = ev.select_cases("dev", [n for n in args.cases.split(",") if n] or None)
+    specs = ev.dev_study_cases(args)
     for spec in specs:
         t0 = time.perf_counter()
         case = ev.make_case(spec)

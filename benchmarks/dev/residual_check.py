@@ -19,25 +19,20 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import blind_eval as ev  # noqa: E402  (benchmarks/blind_eval.py)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", default="", help="comma-separated case names (default: the whole dev split)")
+    ap = ev.dev_study_parser(__doc__)
     ap.add_argument("--scales", default="0.5,2,3", help="multiples of the true path to try")
-    ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args(argv)
-    torch.set_num_threads(args.threads)
 
     from napari_lfdeblur.blind import BlindParams, blind_deblur
     from napari_lfdeblur.blur import simulate_blur
@@ -48,7 +43,7 @@ def main(argv=None):
     p = BlindParams.preset("default").replace(require_evidence=False)
     scales = [float(s) for s in args.scales.split(",") if s]
     print("case | group | d_inf | noise | path | residual (noise variances) | gain dB | blur mismatch")
-    specs, _ = ev.select_cases("dev", [n for n in args.cases.split(",") if n] or None)
+    specs = ev.dev_study_cases(args)
     for spec in specs:
         t0 = time.perf_counter()
         case = ev.make_case(spec)
