@@ -11,7 +11,7 @@ import torch
 
 from napari_lfdeblur.blind import BlindParams, blind_deblur
 from napari_lfdeblur.blind._region import choose_region
-from napari_lfdeblur.path import path_in_frame
+from napari_lfdeblur.path import path_in_frame, path_in_window
 from napari_lfdeblur.blur import simulate_blur
 from napari_lfdeblur.path import bezier_positions, center_path
 from napari_lfdeblur.samples import synthetic_scene
@@ -40,6 +40,26 @@ def test_a_path_found_on_a_window_blurs_the_frame_as_it_blurred_the_window(windo
 def test_the_whole_frame_as_window_leaves_the_path_unchanged():
     cp = np.array([[-0.7, 0.3, 0.9], [0.4, -0.5, -0.6]])
     np.testing.assert_allclose(path_in_frame(cp, (0, 0, 40, 50), (40, 50)), cp)
+    np.testing.assert_allclose(path_in_window(cp, (0, 0, 40, 50), (40, 50)), cp)
+
+
+@pytest.mark.parametrize("window", [(0, 0, 24, 24), (20, 31, 24, 30), (36, 5, 28, 20)])
+@pytest.mark.parametrize("d_inf", [0.0, 0.5])
+def test_a_frame_path_in_a_window_blurs_the_window_as_the_frame_was_blurred(window, d_inf):
+    # independent expectation: the blur operator on the whole frame, cut to the window
+    rng = np.random.default_rng(2)
+    lf = rng.random((5, 5, 64, 72)).astype(np.float32)
+    cp_frame = np.array([[0.6, -0.4, 0.5], [-0.3, 0.7, -0.8], [0.2, -0.2, 0.6]])
+    y0, x0, h, w = window
+    on_frame = simulate_blur(lf, cp_frame, n_times=16, infinity_disparity=d_inf)[:, :, y0:y0 + h, x0:x0 + w]
+    cp_window = path_in_window(cp_frame, window, (64, 72))
+    on_window = simulate_blur(lf[:, :, y0:y0 + h, x0:x0 + w], cp_window, n_times=16, infinity_disparity=d_inf)
+    m = 0 if d_inf == 0 else 3  # d_inf != 0: the window's replicate border differs from the frame's pixels
+    inner = (slice(None), slice(None), slice(m, h - m), slice(m, w - m))
+    np.testing.assert_allclose(on_window[inner], on_frame[inner], atol=2e-6)
+    # and it is path_in_frame's inverse
+    np.testing.assert_allclose(path_in_frame(cp_window, window, (64, 72)), cp_frame, atol=1e-12)
+    assert np.abs(cp_window - cp_frame).max() > 0.1  # the conversion mattered
 
 
 def _textured_lf(texture, at, shape=(3, 3, 96, 96)):

@@ -211,12 +211,13 @@ def test_blur_reach_counts_the_rotations_image_motion():
 
 
 def test_path_helpers_with_rotation():
-    from napari_lfdeblur.path import canonical_time_direction, path_in_frame
+    from napari_lfdeblur.path import canonical_time_direction, path_in_frame, path_in_window
 
-    with pytest.raises(ValueError, match="rotation"):
-        path_in_frame(CP6, (0, 0, 16, 16), (32, 32))
-    no_rot = np.concatenate([CP6[:, :3], np.zeros((3, 3))], axis=1)
-    np.testing.assert_array_equal(path_in_frame(no_rot, (0, 0, 16, 16), (32, 32))[:, 3:], 0.0)
+    for move in (path_in_frame, path_in_window):
+        with pytest.raises(ValueError, match="rotation"):
+            move(CP6, (0, 0, 16, 16), (32, 32))
+        no_rot = np.concatenate([CP6[:, :3], np.zeros((3, 3))], axis=1)
+        np.testing.assert_array_equal(move(no_rot, (0, 0, 16, 16), (32, 32))[:, 3:], 0.0)
     # a rotation-only path is put in its time direction by its rotation
     roll = np.zeros((2, 6))
     roll[:, 5] = [0.05, -0.05]
