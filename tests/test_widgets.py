@@ -368,10 +368,15 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     w.form.device.value = "cpu"
     w.form.preview_every.value = 1
     w.form.edge_anisotropy.value = 0.3
+    inserted = {}  # layer id -> the name it was added under
+    viewer.layers.events.inserted.connect(lambda e: inserted.setdefault(id(e.value), e.value.name))
     w.run()
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
     res = w.last_result
+    # the previews became the result layers (updated in place, not added anew)
+    assert inserted[id(viewer.layers["b deblurred (blind)"])] == "b blind (preview)"
+    assert inserted[id(viewer.layers["b estimated path"])] == "b path (preview)"
     rejected = [] if res.info["blur_found"] else ["b rejected path"]  # the evidence test's verdict
     assert [layer.name for layer in viewer.layers] == ["b", "b deblurred (blind)", "b estimated path", *rejected]
     out = viewer.layers["b deblurred (blind)"]

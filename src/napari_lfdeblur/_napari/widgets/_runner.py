@@ -183,7 +183,8 @@ class SolverWidget(Container):
         return 0
 
     def cleanup(self) -> None:
-        """Remove temporary layers (previews); called on cancel, error and success."""
+        """Remove temporary layers (previews); called on cancel, error and success (after
+        :meth:`on_result`, which may take them over as result layers)."""
 
     # ----------------------------------------------------------- state
     @property
@@ -292,8 +293,8 @@ class SolverWidget(Container):
     def _on_returned(self, result):
         if self._cancelled:
             return
-        self.cleanup()
         if isinstance(result, _Failure):
+            self.cleanup()
             log.error("%s failed:\n%s", self.title, result.traceback)
             notify_error(f"{self.title} failed: {result.exc}")
             self.progress.finish(f"failed: {result.exc}", done=False)
@@ -305,6 +306,8 @@ class SolverWidget(Container):
             log.exception("adding result layers failed")
             notify_error(f"{self.title}: could not add the result: {exc}")
             return
+        finally:
+            self.cleanup()
         self.progress.finish(f"{self.title}: done")
 
     def _on_aborted(self):

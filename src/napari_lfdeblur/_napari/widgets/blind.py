@@ -270,6 +270,13 @@ class BlindDeblurWidget(SolverWidget):
                 metadata={"kind": "path preview"}))
             self.path_preview_updates += 1
 
+    def _adopt_previews(self, name: str, path_name: str) -> None:
+        """Rename the preview layers to the result layers' names (where those are free), so that adding the
+        results updates them in place: a new layer would cost Qt's thread a new canvas visual."""
+        for old, new in ((self.preview_name(), name), (self.path_preview_name(), path_name)):
+            if old in self.viewer.layers and new not in self.viewer.layers:
+                self.viewer.layers[old].name = new
+
     def cleanup(self) -> None:
         if getattr(self, "_job", None):
             remove_layer(self.viewer, self.preview_name())
@@ -293,10 +300,14 @@ class BlindDeblurWidget(SolverWidget):
         )
         if "message" in (getattr(result, "info", None) or {}):
             meta["blur_evidence"] = result.info["message"]
+        path_name = f"{job['source']} estimated path"
+        self._adopt_previews(name, path_name)
         out = add_layer(self.viewer, lightfield_layer_data(result.lightfield, name=name, metadata=meta))
         path = add_layer(self.viewer, path_layer_data(
-            cp, job["shape"], n_times=n_times, name=f"{job['source']} estimated path",
-            true_control_points=job["true"]))
+            cp, job["shape"], n_times=n_times, name=path_name, true_control_points=job["true"]))
+        layers = self.viewer.layers
+        if layers.index(out) > layers.index(path):
+            layers.move(layers.index(out), layers.index(path))  # the path is drawn over the light field
         self.last_layers = [out, path]
         info = getattr(result, "info", None) or {}
         note = ""
