@@ -164,7 +164,8 @@ def main(argv=None):
         "path is estimated on a 128 x 128 window of the views and the final stage runs on the whole light field. "
         "*Default* is what a user gets (the input unchanged when the evidence test finds no significant blur); "
         "*restored anyway* is the result with `require_evidence=False`. The blur mismatch is measured on the "
-        "central 128 x 128 crop of the sharp light field, with every path in the crop's own coordinates. Peak memory: above the input, in units of its size.",
+        "central 128 x 128 crop of the sharp light field, with every path in the crop's own coordinates. Peak "
+        "memory: above the input, in units of its size.",
         "", *table(rows)]
     if skipped:
         body += ["", "Skipped:", *skipped]

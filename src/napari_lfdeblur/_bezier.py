@@ -161,9 +161,6 @@ def center_path(control_points, n_times: int = 32) -> np.ndarray:
     return cp - bezier_positions(cp, n_times).mean(axis=0)
 
 
-# ---------------------------------------------------------------- presets
-
-
 def elevate_degree(control_points, n_points: int) -> np.ndarray:
     """Raise the degree of a Bezier curve without changing it.
 

@@ -55,6 +55,9 @@ __all__ = [
 ]
 
 
+# ---------------------------------------------------------------- presets
+
+
 def linear_path(length: float = 2.0, angle_deg: float = 0.0, z: float = 0.0) -> np.ndarray:
     """A straight in-plane motion of ``length`` views at ``angle_deg``, centred.
 
