@@ -311,24 +311,10 @@ def path_in_window(cp, window, frame_shape) -> np.ndarray:
     replicate border). Use it to judge, on a crop, a path found on the whole
     light field, or to blur a crop as its frame was blurred.
 
-    Parameters
-    ----------
-    cp : array_like, shape (n, 3) or (n, 6)
-        Control points in the frame's coordinates; a 6-column path must have
-        no rotation.
-    window : tuple of 4 int
-        ``(y0, x0, height, width)`` of the window in the frame.
-    frame_shape : tuple of 2 int
-        ``(Y, X)`` of the frame.
-
-    Returns
-    -------
-    ndarray, float64, the shape of ``cp``
-
-    Raises
-    ------
-    ValueError
-        If ``cp`` holds a rotation.
+    The arguments and the result are those of :func:`path_in_frame`, with
+    ``cp`` in the frame's coordinates: ``(n, 3)``, or ``(n, 6)`` without a
+    rotation (a rotation raises ``ValueError``); the result is float64, of
+    ``cp``'s shape.
 
     Examples
     --------
