@@ -132,7 +132,10 @@ def main(argv=None):
                 print(lines[-1], flush=True)
     body = [f"Interior relative error `||model - truth|| / ||truth - sharp||` of two blur models against a "
             f"ray-traced truth (`tests/_raytrace.py`), {SHAPE[0]}x{SHAPE[1]}x{SHAPE[2]}x{SHAPE[3]} light fields, "
-            f"T = {args.n_times} instants; see the script's docstring for the models. Run on a 2-core CPU.",
+            f"T = {args.n_times} instants. *Package*: `simulate_blur` with `infinity_disparity=d_inf`, the model of "
+            "docs/model.md. *Sheared*: the camera focused at infinity, blurred with `d_inf = 0`, its views then "
+            "shifted by `d_inf` px per view (exact at integer `d_inf`). The last column: the root-mean-square "
+            "change that the blur makes to a scene all nearly at infinity. Run on a 2-core CPU.",
             "", *lines]
     out = _report.table_path(args.out, __file__)
     _report.write_table(out, "The blur model at a non-zero infinity disparity against a ray tracer",
