@@ -78,8 +78,9 @@ def refocus(lf: np.ndarray, d_inf: int) -> np.ndarray:
     return out
 
 
-def measure(scene, d_inf: int, cp, n_times: int) -> tuple[float, float]:
-    """``(package error, sheared error)`` against the ray-traced blur, over the interior."""
+def blurs(scene, d_inf: int, cp, n_times: int) -> tuple[np.ndarray, ...]:
+    """``(sharp, truth, package, sheared)``: the refocused camera's sharp light field, its ray-traced blur
+    along ``cp`` and the two models' predictions of that blur."""
     from napari_lfdeblur import simulate_blur
 
     poses = _raytrace.path_poses(cp, n_times)
@@ -88,7 +89,13 @@ def measure(scene, d_inf: int, cp, n_times: int) -> tuple[float, float]:
     package = simulate_blur(sharp, cp, n_times=n_times, infinity_disparity=float(d_inf))
     at_infinity = render(scene, 0).astype(np.float32)
     sheared = refocus(simulate_blur(at_infinity, cp, n_times=n_times, infinity_disparity=0.0), d_inf)
-    margins = (math.ceil(np.abs(poses[:, :2]).max()), 4 * d_inf + 2)
+    return sharp, truth, package, sheared
+
+
+def measure(scene, d_inf: int, cp, n_times: int) -> tuple[float, float]:
+    """``(package error, sheared error)`` against the ray-traced blur, over the interior."""
+    sharp, truth, package, sheared = blurs(scene, d_inf, cp, n_times)
+    margins = (math.ceil(np.abs(_raytrace.path_poses(cp, n_times)[:, :2]).max()), 4 * d_inf + 2)
     return (_raytrace.interior_error(package, truth, sharp, *margins),
             _raytrace.interior_error(sheared, truth, sharp, *margins))
 
@@ -97,17 +104,10 @@ def far_scene_change(d_inf: int, cp, n_times: int) -> tuple[float, float, float]
     """RMS change by the blur of a scene all at disparity ``d_inf - 0.02``: truth, package, sheared."""
     radius = max(SHAPE[2:]) / 2.0
     scene = _raytrace.make_scene(radius, disparities=(-0.02, -0.02), seed=2)
-    poses = _raytrace.path_poses(cp, n_times)
-    truth = sum(render(scene, d_inf, pose) for pose in poses) / n_times
-    sharp = render(scene, d_inf).astype(np.float32)
-    from napari_lfdeblur import simulate_blur
-
-    package = simulate_blur(sharp, cp, n_times=n_times, infinity_disparity=float(d_inf))
-    sheared = refocus(simulate_blur(render(scene, 0).astype(np.float32), cp, n_times=n_times,
-                                    infinity_disparity=0.0), d_inf)
+    sharp, *blurred = blurs(scene, d_inf, cp, n_times)
     m = 4 * d_inf + 2
     inner = (slice(2, -2), slice(2, -2), slice(m, -m), slice(m, -m))
-    return tuple(float(np.sqrt(np.mean((a[inner] - sharp[inner]) ** 2))) for a in (truth, package, sheared))
+    return tuple(float(np.sqrt(np.mean((a[inner] - sharp[inner]) ** 2))) for a in blurred)
 
 
 def main(argv=None):
@@ -120,12 +120,15 @@ def main(argv=None):
              "error, sheared model | RMS change of a scene near infinity: truth / package / sheared |",
              "|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
+    # the far scene is the same for every scene of the table: one measurement per d_inf and path
+    far_change = {(d_inf, name): far_scene_change(d_inf, cp, args.n_times) for d_inf in D_INF
+                  for name, cp in PATHS.items()}
     for disparities in SCENES:
         scene = _raytrace.make_scene(radius, disparities=disparities, seed=1)
         for d_inf in D_INF:
             for name, cp in PATHS.items():
                 e_pkg, e_sh = measure(scene, d_inf, cp, args.n_times)
-                far = far_scene_change(d_inf, cp, args.n_times)
+                far = far_change[d_inf, name]
                 seen = ", ".join(f"{d + d_inf:+g}" for d in disparities)
                 lines.append(f"| {', '.join(map(str, disparities))} (seen at {seen}) | {d_inf} | {name} | "
                              f"{e_pkg:.3f} | {e_sh:.3f} | {far[0]:.4f} / {far[1]:.4f} / {far[2]:.4f} |")
