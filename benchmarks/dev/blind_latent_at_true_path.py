@@ -49,7 +49,7 @@ def main(argv=None):
         case = ev.make_case(name)
         g = gray(torch.as_tensor(case.blurred, dtype=torch.float32))
         V, U = g.shape[:2]
-        box = max(0.5, 0.35 * (min(V, U) - 1))
+        box = p.path_box(V, U)
         true = center_path(case.control_points, T)
         true[:, 2] = 0.0
         for sigma in (float(s) for s in args.sigmas.split(",")):

@@ -64,7 +64,7 @@ def main(argv=None):
         if d:  # the path stage's d_inf = 0 frame
             g, truth = shear(g, d), shear(truth, d)
         V, U = g.shape[:2]
-        box = max(0.5, 0.35 * (min(V, U) - 1))
+        box = p.path_box(V, U)
         cp_true = center_path(case.control_points, p.n_times)
 
         def latent(cp):

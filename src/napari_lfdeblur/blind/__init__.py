@@ -360,7 +360,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     V, U, Y, X = arr.shape[:4]
-    box = p.max_extent if p.max_extent > 0 else max(0.5, 0.35 * (min(V, U) - 1))
+    box = p.path_box(V, U)
     sheared = p.method == "alternating" and d_inf != 0.0
     g, window = _path_window(arr, d_inf, p, dev, sheared)  # the path is the same everywhere
 

@@ -376,6 +376,11 @@ class BlindParams(JsonParams):
             raise TypeError(f"BlindParams.final must be a DeconvolutionParams or None; got "
                             f"{type(self.final).__name__}")
 
+    def path_box(self, V: int, U: int) -> float:
+        """The bound of the estimated control points for ``V x U`` views, views: ``max_extent``, or
+        ``max(0.5, 0.35 (min(V, U) - 1))`` when it is 0."""
+        return self.max_extent if self.max_extent > 0 else max(0.5, 0.35 * (min(V, U) - 1))
+
     @classmethod
     def preset(cls, name: str) -> "BlindParams":
         """The named preset: ``'default'`` (the alternating method) or ``'paper'`` (the published settings)."""
