@@ -1,4 +1,4 @@
-"""Where to estimate the path of a whole light field: the chosen window, other windows, the coarse whole view.
+"""Where to estimate the path of a whole light field: the chosen windows, other windows, the coarse whole view.
 
 Usage::
 
@@ -10,7 +10,9 @@ the Lytro Illum capture ``lytro-illum-2067`` at ``d_inf = 0`` when it is availab
 known path with ``p_z != 0`` (64 instants, noise 0.005), the path stage of ``blind_deblur`` (default
 parameters, no final stage) runs on:
 
-- ``chosen``: the 128 x 128 window the default picks (edges in two directions times disparity weight);
+- ``windows``: the default: four 128 x 128 windows, one in each quarter of the view, each the best there
+  (edges in two directions times disparity weight), one path fitted to all four;
+- ``one window``: the best 128 x 128 window of the whole view (``path.n_regions = 1``);
 - ``central``: the central 128 x 128 crop;
 - ``random k``: 128 x 128 windows at random positions (seeded);
 - ``coarse``: the whole view, area-averaged by 4 (``path.region = 0``, ``path.max_size = 128``).
@@ -45,14 +47,15 @@ def scenes(seeds, d_infs):
 
 
 def estimate(blurred, d_inf, window, params):
-    """The path found on ``window`` (None: the default's own choice), in frame coordinates, and seconds."""
+    """The path found on ``window`` (None: ``params``' own choice), in frame coordinates, the windows, seconds."""
     from napari_lfdeblur.blind import blind_deblur
     from napari_lfdeblur.path import path_in_frame
 
     t0 = time.perf_counter()
     if window is None:
         res = blind_deblur(blurred, infinity_disparity=d_inf, params=params, device="cpu", seed=0)
-        return res.control_points, tuple(res.info["window"]), time.perf_counter() - t0
+        used = [tuple(w) for w in res.info["windows"]]
+        return res.control_points, used[0] if len(used) == 1 else used, time.perf_counter() - t0
     y0, x0, h, w = window
     res = blind_deblur(blurred[:, :, y0 : y0 + h, x0 : x0 + w], infinity_disparity=d_inf, params=params,
                        device="cpu", seed=0)
@@ -67,20 +70,22 @@ def run(args) -> list[str]:
     base = BlindParams().replace(final=None, require_evidence=False)
     coarse = base.replace(path={"region": 0, "max_size": SIZE})
     rng = np.random.default_rng(0)
-    rows = ["| scene | d_inf | where | window (y0, x0, h, w) | blur mismatch | seconds |", "|---|---|---|---|---|---|"]
+    rows = ["| scene | d_inf | where | windows (y0, x0, h, w) | blur mismatch | seconds |", "|---|---|---|---|---|---|"]
     summary: dict = {}
     for name, d_inf, sharp in scenes(args.seeds, args.infinity_disparity):
         blurred = simulate_blur(sharp, PATH, n_times=64, infinity_disparity=d_inf)
         blurred = np.clip(blurred + rng.normal(0, 0.005, blurred.shape), 0, 1).astype(np.float32)
         Y, X = sharp.shape[2:4]
-        choices = [("chosen", None, base), ("central", ((Y - SIZE) // 2, (X - SIZE) // 2, SIZE, SIZE), base)]
+        central = ((Y - SIZE) // 2, (X - SIZE) // 2, SIZE, SIZE)
+        choices = [("windows", None, base), ("one window", None, base.replace(path={"n_regions": 1})),
+                   ("central", central, base)]
         choices += [(f"random {k + 1}", (int(rng.integers(0, Y - SIZE)), int(rng.integers(0, X - SIZE)), SIZE, SIZE),
                      base) for k in range(args.random_windows)]
         choices.append(("coarse", (0, 0, Y, X), coarse))
         for label, window, params in choices:
             cp, used, seconds = estimate(blurred, d_inf, window, params)
             mismatch = path_error(cp, PATH, lightfield=sharp, infinity_disparity=d_inf).blur_mismatch
-            kind = label.split()[0]
+            kind = "random" if label.startswith("random") else label
             summary.setdefault(kind, []).append(mismatch)
             rows.append(f"| {name} | {d_inf:+g} | {label} | {used} | {mismatch:.3f} | {seconds:.1f} |")
             print(rows[-1], file=sys.stderr, flush=True)

@@ -26,7 +26,7 @@ from napari_lfdeblur import read_lightfield, write_lightfield  # noqa: E402
 from napari_lfdeblur.batch import read_manifest, simulate_item  # noqa: E402
 
 N_PER_INPUT = 16  # enough work left after the first item that the interrupt lands mid-run
-N_TIMES = 256  # slow items (about 0.1 s each), so that the run is surely interrupted mid-way
+N_TIMES = 1024  # slow items (about 0.3 s each), so that the run is surely interrupted mid-way
 OPTIONS = ["--n-per-input", str(N_PER_INPUT), "--path-kind", "shake", "--extent", "1.5", "--noise", "0.01",
            "--n-times", str(N_TIMES), "--device", "cpu", "--seed", "7"]
 

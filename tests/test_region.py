@@ -10,9 +10,11 @@ import pytest
 import torch
 
 from napari_lfdeblur.blind import BlindParams, blind_deblur
-from napari_lfdeblur.blind._region import choose_region
+from napari_lfdeblur.blind._path_fit import GramLoss
+from napari_lfdeblur.blind._region import choose_region, choose_regions
 from napari_lfdeblur.path import path_in_frame, path_in_window
 from napari_lfdeblur.blur import simulate_blur
+from napari_lfdeblur.metrics import path_error
 from napari_lfdeblur.path import bezier_positions, center_path
 from napari_lfdeblur.samples import synthetic_scene
 
@@ -98,8 +100,8 @@ def test_blind_on_a_large_view_estimates_the_path_on_a_window_and_restores_the_w
     blurred = simulate_blur(sharp, cp, n_times=32)
     quick = dict(path=dict(n_outer=3, steps=100, n_random=100, n_random_later=40, z_outer=1), final={"n_iter": 30},
                  final_n_times=16, require_evidence=False, n_control_points=3)
-    windowed = blind_deblur(blurred, params=BlindParams().replace(**quick).replace(path={"region": 48}),
-                            device="cpu", seed=0)
+    one_window = BlindParams().replace(**quick).replace(path={"region": 48, "n_regions": 1})
+    windowed = blind_deblur(blurred, params=one_window, device="cpu", seed=0)
     y0, x0, h, w = windowed.info["window"]
     assert (h, w) == (48, 48)
     # the same pipeline on the window alone (the crop pipeline), carried to the frame
@@ -114,6 +116,54 @@ def test_blind_on_a_large_view_estimates_the_path_on_a_window_and_restores_the_w
     assert np.abs(pos - truth).max() < 0.5  # measured 0.34 (the path spans about 1.6 views)
     err_in, err_out = np.abs(blurred - sharp).mean(), np.abs(windowed.lightfield - sharp).mean()
     assert windowed.lightfield.shape == sharp.shape and err_out < 0.7 * err_in
+
+
+@pytest.mark.parametrize("window", [(0, 0, 24, 24), (20, 31, 24, 30), (36, 5, 28, 20)])
+def test_the_path_fit_of_a_window_in_its_frame_equals_the_fit_of_the_path_moved_into_the_window(window):
+    # independent expectation: the window's own fit of the frame path moved by path_in_window
+    rng = np.random.default_rng(4)
+    y0, x0, h, w = window
+    f = torch.as_tensor(rng.random((5, 5, h, w, 1), dtype=np.float32))
+    latent = torch.as_tensor(rng.random((5, 5, h, w, 1), dtype=np.float32))
+    cps = rng.uniform(-0.8, 0.8, (6, 3, 3))
+    fits = []
+    for frame, paths in (((y0, x0, 64, 72), cps), (None, [path_in_window(c, window, (64, 72)) for c in cps])):
+        fit = GramLoss(f, 200, np.random.default_rng(0), 16, 2.0, 1.0, 2, frame=frame)
+        fit.set_latent(latent)
+        fits.append(fit(torch.as_tensor(np.stack(paths), dtype=torch.float32)).numpy())
+    np.testing.assert_allclose(fits[0], fits[1], rtol=1e-4)
+    assert np.ptp(fits[0]) > 0.01 * np.abs(fits[0]).max()  # the paths fit differently
+
+
+def test_choose_regions_spreads_its_windows_one_per_cell():
+    rng = np.random.default_rng(5)
+    g = torch.as_tensor(rng.random((3, 3, 100, 150, 1), dtype=np.float32))
+    windows = choose_regions(g, 40, disparity_power=0.0, n=4)
+    assert len(windows) == 4 and all((h, w) == (40, 40) for _, _, h, w in windows)
+    cells = {(y0 >= 50, x0 >= 75) for y0, x0, _, _ in windows}  # 2 x 2 cells: one window in each
+    assert cells == {(False, False), (False, True), (True, False), (True, True)}
+    for i, (ya, xa, _, _) in enumerate(windows):
+        for yb, xb, _, _ in windows[i + 1:]:
+            assert abs(ya - yb) >= 40 or abs(xa - xb) >= 40  # no overlap
+    # a view that holds one window per row only: a row of windows
+    assert len(choose_regions(g[:, :, :60], 40, 0.0, n=4)) == 2
+    assert choose_regions(g, 40, 0.0, n=1) == [choose_region(g, 40, 0.0)]
+    assert choose_regions(g[:, :, :40, :40], 40, 0.0, n=4) == [(0, 0, 40, 40)]
+
+
+def test_blind_on_a_large_view_fits_one_path_to_several_windows():
+    sharp, _ = synthetic_scene((5, 5, 96, 128), seed=3)
+    cp = np.array([[-0.8, 0.3, 0.4], [0.2, -0.6, -0.3], [0.7, 0.5, 0.2]])
+    blurred = simulate_blur(sharp, cp, n_times=32)
+    quick = dict(path=dict(n_outer=3, steps=100, n_random=100, n_random_later=40, z_outer=1, region=48, n_regions=4),
+                 final={"n_iter": 30}, final_n_times=16, require_evidence=False, n_control_points=3)
+    res = blind_deblur(blurred, params=BlindParams().replace(**quick), device="cpu", seed=0)
+    windows = res.info["windows"]
+    assert len(windows) == 4 and res.info["window"] == windows[0]
+    # the path is the frame's: it blurs the whole frame nearly as the true one does, and restores it
+    assert path_error(res.control_points, cp, lightfield=sharp).blur_mismatch < 0.25  # measured 0.13
+    err_in, err_out = np.abs(blurred - sharp).mean(), np.abs(res.lightfield - sharp).mean()
+    assert err_out < 0.7 * err_in
 
 
 _PEAK_SCRIPT = r"""

@@ -103,7 +103,7 @@ from ._disparity import gray, shear
 from ._evidence import blur_evidence, evidence_message
 from ._joint import iter_joint
 from ._memory import TILE_MARGIN, estimate_blind_memory, plan_tiles, tiles
-from ._region import choose_region
+from ._region import choose_regions
 from ._rotation import iter_rotation_fit
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams, RotationFitParams
 
@@ -332,12 +332,13 @@ def _preview(latent: torch.Tensor, fac: int, shape, unshear: float, offset=(0, 0
     return np.ascontiguousarray(out, dtype=np.float32)
 
 
-def _path_window(arr, d_inf, p: BlindParams, dev, sheared):
-    """The grayscale light field the path is estimated on, and its window ``(y0, x0, h, w)`` in the view.
+def _path_windows(arr, d_inf, p: BlindParams, dev, sheared):
+    """The grayscale light fields the path is estimated on, and their windows ``(y0, x0, h, w)`` in the view.
 
     Refocused by ``d_inf`` when ``sheared`` (the path fit then uses the
-    ``d_inf = 0`` model); cut to :func:`~napari_lfdeblur.blind._region.choose_region`'s
-    window when the views are larger than ``p.path.region``.
+    ``d_inf = 0`` model); cut to :func:`~napari_lfdeblur.blind._region.choose_regions`'
+    windows (``p.path.n_regions`` of them; one for the ``'6dof'`` motion and
+    the ``'joint'`` method) when the views are larger than ``p.path.region``.
     """
     Y, X = arr.shape[2:4]
     f = torch.as_tensor(np.ascontiguousarray(arr), dtype=torch.float32, device=dev)
@@ -346,13 +347,13 @@ def _path_window(arr, d_inf, p: BlindParams, dev, sheared):
     if sheared:
         g = shear(g, d_inf)
     if not p.path.region:
-        return g, (0, 0, Y, X)
+        return [g], [(0, 0, Y, X)]
     margin = math.ceil(abs(d_inf) * (max(arr.shape[:2]) - 1) / 2.0)  # refocused samples read beyond the edge
-    window = choose_region(g, p.path.region, p.path.disparity_weight, margin)
-    if window == (0, 0, Y, X):
-        return g, window
-    y0, x0, h, w = window
-    return g[:, :, y0 : y0 + h, x0 : x0 + w].contiguous(), window
+    n = p.path.n_regions if p.motion == "3dof" and p.method == "alternating" else 1
+    windows = choose_regions(g, p.path.region, p.path.disparity_weight, margin, n)
+    if windows == [(0, 0, Y, X)]:
+        return [g], windows
+    return [g[:, :, y0 : y0 + h, x0 : x0 + w].contiguous() for y0, x0, h, w in windows], windows
 
 
 def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
@@ -362,20 +363,23 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     V, U, Y, X = arr.shape[:4]
     box = p.path_box(V, U)
     sheared = p.method == "alternating" and d_inf != 0.0
-    g, window = _path_window(arr, d_inf, p, dev, sheared)  # the path is the same everywhere
+    gs, windows = _path_windows(arr, d_inf, p, dev, sheared)  # the path is the same everywhere
+    g, window = gs[0], windows[0]
+    # several windows: the path stage works in the frame's coordinates from the start
+    frames = [(y0, x0, Y, X) for y0, x0, _, _ in windows] if len(windows) > 1 else None
 
     def preview(latent, fac):
         return _preview(latent, fac, arr.shape, d_inf if sheared else 0.0, window[:2])
 
     if p.method == "alternating":
-        est = yield from iter_alternating(g, p, dev, rng, box, preview)
+        est = yield from iter_alternating(gs, p, dev, rng, box, preview, frames)
         if p.motion == "6dof":  # its path is in the frame's coordinates
             est = yield from iter_rotation_fit(g, est, p, dev, window, (Y, X), box)
     else:
         est = yield from iter_joint(g, d_inf, p, dev, rng, box, preview)
-    info = {"device": str(dev), "box": box, "window": window, **est.info}
+    info = {"device": str(dev), "box": box, "window": window, "windows": windows, **est.info}
     info["levels"] = [(g.shape[2] // k, g.shape[3] // k) for k in est.factors]
-    frame = (window[0], window[1], Y, X) if p.motion == "6dof" else None
+    frame = (window[0], window[1], Y, X) if p.motion == "6dof" or frames else None
     evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev, frame)
     restore = evidence["blur_found"] or not p.require_evidence
     light = 0.0 if restore else p.light_restoration
@@ -390,7 +394,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
         info["tile"] = tuple(tile)
     cp = canonical_time_direction(center_path(cp, p.n_times))
     t1 = time.perf_counter()
-    del g
+    del g, gs
     if p.final is not None and (restore or light):
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages)
     else:

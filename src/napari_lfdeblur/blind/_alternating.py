@@ -20,7 +20,7 @@ from ..progress import Progress
 from ._disparity import disparity_weights, downsample
 from ._latent import EdgeBlurred, edge_sigmas, l0_latent, n_hqs_steps
 from ._params import BlindParams, PathEstimate
-from ._path_fit import FIT_REPORT_EVERY, GramLoss, PathParam, fit_path
+from ._path_fit import FIT_REPORT_EVERY, GramLoss, PathParam, SumLoss, fit_path
 
 __all__ = ["iter_alternating", "pyramid_factors", "relay"]
 
@@ -39,8 +39,14 @@ def pyramid_factors(Y: int, X: int, p: BlindParams) -> list[int]:
     return factors
 
 
-def iter_alternating(g: torch.Tensor, p: BlindParams, device, rng, box: float, preview=None):
+def iter_alternating(g, p: BlindParams, device, rng, box: float, preview=None, frames=None):
     """Coarse-to-fine salient-edge / path alternation on the grayscale ``g`` (V, U, Y, X, 1), ``d_inf = 0``.
+
+    ``g`` may also be a list of windows of one view, with ``frames`` their
+    ``(y0, x0, Y_full, X_full)``: each window then has its own latent, the
+    path is fitted to all of them at once (their fits summed), and it is
+    the path of the whole view. Without ``frames`` the path is that of ``g``
+    itself.
 
     A generator: yields a :class:`~napari_lfdeblur.progress.Progress` record
     after every conjugate-gradient iteration of the latent, every
@@ -53,7 +59,8 @@ def iter_alternating(g: torch.Tensor, p: BlindParams, device, rng, box: float, p
     given, turns a latent at a pyramid factor into the light-field estimate
     of the records' ``estimate``.
     """
-    run = _Alternation(g, p, device, rng, box, preview)
+    gs = list(g) if isinstance(g, (list, tuple)) else [g]
+    run = _Alternation(gs, [None] * len(gs) if frames is None else list(frames), p, device, rng, box, preview)
     cp = yield from run.run()
     return PathEstimate(cp, run.factors, len(run.stages), run.history, run.info)
 
@@ -61,9 +68,10 @@ def iter_alternating(g: torch.Tensor, p: BlindParams, device, rng, box: float, p
 class _Alternation:
     """The state of one run of :func:`iter_alternating`."""
 
-    def __init__(self, g, p: BlindParams, device, rng, box, preview):
-        self.g, self.p, self.device, self.rng, self.box, self.preview = g, p, device, rng, box, preview
-        self.Y, self.X = g.shape[2:4]
+    def __init__(self, gs, frames, p: BlindParams, device, rng, box, preview):
+        self.gs, self.frames, self.p, self.device, self.rng, self.box = gs, frames, p, device, rng, box
+        self.preview = preview
+        self.Y, self.X = gs[0].shape[2:4]
         self.factors = pyramid_factors(self.Y, self.X, p)
         # stages: (factor, p_z free, alternations); with estimate_z, a last stage on the finest level
         # frees p_z, starting from the in-plane estimate
@@ -73,21 +81,22 @@ class _Alternation:
         lat = p.latent
         # reports per alternation: latent steps (at most those at the smallest lambda), fit reports, the end
         lam_min = min(lat.l0_weight, lat.l0_weight * lat.l0_floor)
-        self.per_outer = (n_hqs_steps(lam_min, lat) * (lat.n_cg + 1)
+        self.per_outer = (len(gs) * n_hqs_steps(lam_min, lat) * (lat.n_cg + 1)
                           + (p.path.steps - 1) // FIT_REPORT_EVERY + 1)
         self.history: list = []
         self.info: dict = {}
-        self.disparity: dict = {}  # level factor -> pixel weights of the fit
+        self.disparity: dict = {}  # (level factor, window) -> pixel weights of the fit
 
     def record(self, stage, fac, it, cur, latent, loss=float("nan"), **extra) -> Progress:
         n_stages = len(self.stages) + (self.p.motion == "6dof")  # then the rotation stage
         estimate = None
-        if self.preview is not None:
-            def estimate(latent=latent, fac=fac):
+        if self.preview is not None:  # the first window's latent
+            def estimate(latent=latent[0], fac=fac):
                 return self.preview(latent, fac)
         kind = "p_z" if self.stages[stage][1] else "level"
+        size = f"{self.Y // fac}x{self.X // fac}" + (f", {len(self.gs)} windows" if len(self.gs) > 1 else "")
         return Progress(
-            stage=f"path ({kind} {stage + 1}/{n_stages}, {self.Y // fac}x{self.X // fac})",
+            stage=f"path ({kind} {stage + 1}/{n_stages}, {size})",
             iteration=it, n_iterations=self.stages[stage][2] * self.per_outer, loss=loss,
             control_points=np.array(cur), estimate=estimate, stage_index=stage, n_stages=n_stages + 1,
             info={"level": stage, "factor": fac, **extra},
@@ -112,13 +121,18 @@ class _Alternation:
         """One pyramid level (or the ``p_z`` stage): alternations until the path stands still."""
         p, rng = self.p, self.rng
         fac, free_z, n_outer = self.stages[stage]
-        f = downsample(self.g, fac)
-        if p.path.disparity_weight > 0 and fac not in self.disparity:
-            self.disparity[fac] = disparity_weights(f, p.path.disparity_weight)
-        sub = GramLoss(f, p.path.n_pixels, rng, p.n_times, self.box, self.box * p.path.z_box if free_z else 0.0,
-                       p.path.tiles if free_z else 1, weight=self.disparity.get(fac))
-        if latent is None or latent.shape != f.shape:
-            latent = f.clone()
+        fs = [downsample(g, fac) for g in self.gs]
+        frames = [self.level_frame(fr, fac) for fr in self.frames]
+        parts = []
+        for i, (f, frame) in enumerate(zip(fs, frames)):
+            if p.path.disparity_weight > 0 and (fac, i) not in self.disparity:
+                self.disparity[fac, i] = disparity_weights(f, p.path.disparity_weight)
+            parts.append(GramLoss(f, p.path.n_pixels // len(fs), rng, p.n_times, self.box,
+                                  self.box * p.path.z_box if free_z else 0.0, p.path.tiles if free_z else 1,
+                                  weight=self.disparity.get((fac, i)), frame=frame))
+        sub = parts[0] if len(parts) == 1 else SumLoss(parts)
+        if latent is None or latent[0].shape != fs[0].shape:
+            latent = [f.clone() for f in fs]
         cur = np.zeros((n_lvl, 3)) if cp is None else elevate_degree(cp, n_lvl)
         if not free_z:
             cur[:, 2] = 0.0
@@ -128,8 +142,8 @@ class _Alternation:
             first = cp is None and outer == 1
             sigma = edge_sigmas(p.latent) if outer >= es_from else (0.0, 0.0)
             base, tick = (outer - 1) * self.per_outer, [0]
-            latent = yield from self.latent_step(stage, f, cur, latent, lam, sigma, base, tick, outer)
-            sub.set_latent(latent, None if first else cur, p.path.robust, sigma)
+            latent = yield from self.latent_step(stage, fs, frames, cur, latent, lam, sigma, base, tick, outer)
+            sub.set_latent(latent[0] if len(parts) == 1 else latent, None if first else cur, p.path.robust, sigma)
             candidates = self.candidates(first, cur, n_lvl, free_z, starts)
             loss, new = yield from self.fit_step(stage, fac, sub, candidates, free_z, latent, lam, base, tick, outer,
                                                  first)
@@ -145,19 +159,29 @@ class _Alternation:
                 break
         return cur, lam, latent
 
-    def latent_step(self, stage, f, cur, latent, lam, sigma, base, tick, outer):
-        """The salient-edge latent under the current path, one record per CG iteration."""
+    @staticmethod
+    def level_frame(frame, fac):
+        """A window's frame at the pyramid level of factor ``fac`` (None: the window is the view)."""
+        return None if frame is None else tuple(int(v) // fac for v in frame)
+
+    def latent_step(self, stage, fs, frames, cur, latent, lam, sigma, base, tick, outer):
+        """The salient-edge latent of each window under the current path, one record per CG iteration."""
         fac = self.stages[stage][0]
-        op = BlurOperator(tuple(f.shape), cur, n_times=self.p.n_times, infinity_disparity=0.0, device=self.device)
-        if max(sigma) > 0:
-            op = EdgeBlurred(op, sigma)
+        out = list(latent)
+        for i, (f, frame) in enumerate(zip(fs, frames)):
+            op = BlurOperator(tuple(f.shape), cur, n_times=self.p.n_times, infinity_disparity=0.0,
+                              device=self.device, frame=frame)
+            if max(sigma) > 0:
+                op = EdgeBlurred(op, sigma)
 
-        def report(x):
-            tick[0] = min(tick[0] + 1, self.per_outer - 1)
-            return self.record(stage, fac, base + tick[0], cur, x, alternation=outer, phase="latent",
-                               **{"lambda": lam})
+            def report(x, i=i):
+                tick[0] = min(tick[0] + 1, self.per_outer - 1)
+                shown = out[:i] + [x] + out[i + 1 :]
+                return self.record(stage, fac, base + tick[0], cur, shown, alternation=outer, phase="latent",
+                                   **{"lambda": lam})
 
-        return (yield from relay(l0_latent(op, f, lam, self.p.latent, latent), report))
+            out[i] = yield from relay(l0_latent(op, f, lam, self.p.latent, out[i]), report)
+        return out
 
     def candidates(self, first, cur, n_lvl, free_z, starts):
         """The batch of paths to fit: lines and random paths at first; later the current path and variants."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ._params import BlindParams
+from ._region import region_grid
 
 __all__ = ["estimate_blind_memory", "plan_tiles", "tiles", "TILE_MARGIN", "MIN_TILE", "FINAL_TENSORS"]
 
@@ -44,9 +45,10 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     final = n * 4 * (FINAL_TENSORS * group + C)
     r = p.path.region
     ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
-    # the full-size input and its grayscale (and refocused) copies, then the window's path stage:
-    # f, latent, CG vectors, gradients and autograd buffers (grayscale)
-    path = n * C * 4 + n * 4 * 2 + V * U * ny * nx * 4 * 16
+    rows, cols = region_grid(Y, X, r, p.path.n_regions) if r and (ny, nx) != (Y, X) else (1, 1)
+    # the full-size input and its grayscale (and refocused) copies, then the windows' path stage: each
+    # window's f and latent, and one window's CG vectors, gradients and autograd buffers (grayscale)
+    path = n * C * 4 + n * 4 * 2 + V * U * ny * nx * 4 * (2 * rows * cols + 14)
     tables = 4 * max(p.n_times, p.final_n_times) * (X * U * U + Y * V * V) * 2
     blocks = 4 * (1 << 22) * 3
     return int(max(final, path) + tables + blocks)

@@ -109,6 +109,16 @@ class PathFitParams(JsonParams):
         directions, disparity away from ``d_inf``; docs/blind.md) and used
         for the whole light field, so that its cost does not grow with the
         capture (0: on the whole view).
+    n_regions : int
+        On views larger than ``region``, the number of such windows, spread
+        over the view (one in each cell of a grid, see
+        :func:`~napari_lfdeblur.blind._region.choose_regions`), each with its
+        own latent, the path fitted to all at once. Out-of-plane motion
+        blurs the parts of the view differently, so windows far apart
+        constrain ``p_z`` (and the path as a whole) better than one window
+        of as many pixels. Each window costs the path stage about as much
+        as the first. The ``'6dof'`` motion and the ``'joint'`` method use
+        one window.
     n_levels : int
         Spatial pyramid levels (1 = full resolution only). Levels smaller
         than ``min_size`` px are skipped.
@@ -180,6 +190,7 @@ class PathFitParams(JsonParams):
     """
 
     region: int = 128
+    n_regions: int = 4
     n_levels: int = 1
     min_size: int = 24
     max_size: int = 0
@@ -205,7 +216,7 @@ class PathFitParams(JsonParams):
     _what = "blind path fit"
 
     def __post_init__(self):
-        ints = {"region": 0, "n_levels": 1, "min_size": 4, "max_size": 0, "n_outer": 1, "n_restarts": 1, "steps": 1,
+        ints = {"region": 0, "n_regions": 1, "n_levels": 1, "min_size": 4, "max_size": 0, "n_outer": 1, "n_restarts": 1, "steps": 1,
                 "n_pixels": 16, "n_random": 0, "n_random_later": 0, "n_perturb": 0, "tiles": 1, "z_outer": 0}
         _check(self, "BlindParams.path", ints=ints,
                nonneg=("init_length", "tol", "robust", "perturb", "disparity_weight", "z_box"),

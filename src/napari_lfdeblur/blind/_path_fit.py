@@ -19,7 +19,7 @@ from ..priors import gradient_yx
 from ._adam import Adam
 from ._latent import gauss_yx
 
-__all__ = ["PathParam", "GramLoss", "fit_path", "FIT_REPORT_EVERY", "FIT_RTOL", "FIT_PATIENCE"]
+__all__ = ["PathParam", "GramLoss", "SumLoss", "fit_path", "FIT_REPORT_EVERY", "FIT_RTOL", "FIT_PATIENCE"]
 
 #: Adam steps of the path fit between two progress reports
 FIT_REPORT_EVERY = 10
@@ -122,10 +122,15 @@ class GramLoss:
     are sums of entries of the ``VU x VU`` Gram matrices of the views
     (latent with latent, latent with data), which are all that is computed
     over the pixels.
+
+    ``frame = (y0, x0, Y_full, X_full)`` says that ``f`` is the window at
+    ``(y0, x0)`` of a larger view: the path is then that of the larger view
+    (its ``x~, y~``), as in :class:`~napari_lfdeblur.blur.BlurOperator`.
     """
 
-    def __init__(self, f, n_pixels, rng, T, box_xy, box_z, tiles, weight=None):
+    def __init__(self, f, n_pixels, rng, T, box_xy, box_z, tiles, weight=None, frame=None):
         V, U, Y, X, _ = f.shape
+        y0, x0, Yf, Xf = (0, 0, Y, X) if frame is None else frame
         self.V, self.U, self.Y, self.X, self.T = V, U, Y, X, T
         self.R = int(min(max(V, U) - 1, math.floor(box_xy + box_z) + 1))
         R = self.R
@@ -139,13 +144,13 @@ class GramLoss:
         self.xs = torch.as_tensor(xs, device=dev)
         self.pix_tile = torch.as_tensor(sel_tile, device=dev)
         self.n_tiles = tiles * tiles
-        r = max(X, Y) / 2.0
+        r = max(Xf, Yf) / 2.0
         cy = np.array([(ys[tile_of[sel] // tiles == i]).mean() if np.any(tile_of[sel] // tiles == i) else 0
                        for i in range(tiles)])
         cx = np.array([(xs[tile_of[sel] % tiles == i]).mean() if np.any(tile_of[sel] % tiles == i) else 0
                        for i in range(tiles)])
-        tyc = (np.repeat(cy, tiles) - (Y - 1) / 2.0) / r
-        txc = (np.tile(cx, tiles) - (X - 1) / 2.0) / r
+        tyc = (y0 + np.repeat(cy, tiles) - (Yf - 1) / 2.0) / r
+        txc = (x0 + np.tile(cx, tiles) - (Xf - 1) / 2.0) / r
         self.xt = torch.as_tensor(txc, dtype=dt, device=dev)
         self.yt = torch.as_tensor(tyc, dtype=dt, device=dev)
         # the data's gradients at the pixels: (M, V*U*2)
@@ -217,6 +222,21 @@ class GramLoss:
         K = self.kernels(cp)
         quad = torch.einsum("...ti,tij,...tj->...", K, self.G, K) - 2.0 * (self.b * K).sum(dim=(-1, -2))
         return quad * self.scale
+
+
+class SumLoss:
+    """The sum of several :class:`GramLoss` fits of one path (windows of one view, each with its latent)."""
+
+    def __init__(self, parts):
+        self.parts = list(parts)
+
+    def set_latent(self, latents, cp=None, robust: float = 0.0, sigma=0.0):
+        """:meth:`GramLoss.set_latent` of each part, with its own latent."""
+        for part, latent in zip(self.parts, latents, strict=True):
+            part.set_latent(latent, cp, robust, sigma)
+
+    def __call__(self, cp):
+        return sum(part(cp) for part in self.parts)
 
 
 def fit_path(pp: PathParam, loss_fn, steps: int, lr: float, every: int = FIT_REPORT_EVERY):

@@ -17,13 +17,15 @@ window over to the full frame.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 from scipy import ndimage
 
 from ._disparity import disparity_weights
 
-__all__ = ["choose_region", "region_score", "STRUCTURE_SIGMA"]
+__all__ = ["choose_region", "choose_regions", "region_grid", "region_score", "STRUCTURE_SIGMA"]
 
 #: Gaussian (px) integrating the structure tensor
 STRUCTURE_SIGMA = 2.0
@@ -81,21 +83,71 @@ def choose_region(g: torch.Tensor, size: int, disparity_power: float, margin: in
     y0, x0, height, width : int
         The window, inside the view.
     """
+    return choose_regions(g, size, disparity_power, margin, 1)[0]
+
+
+def region_grid(Y: int, X: int, size: int, n: int) -> tuple[int, int]:
+    """``(rows, cols)`` of the grid of cells :func:`choose_regions` picks one window from each of.
+
+    ``rows * cols <= n``, each cell at least ``size`` px on each side (so the
+    windows do not overlap), and the cells as near square as ``n`` allows:
+    ``rows`` the largest divisor of ``n`` not above ``sqrt(n)``, along the
+    shorter side of the view.
+    """
+    a = max(r for r in range(1, math.isqrt(max(n, 1)) + 1) if n % r == 0)
+    short, long_ = (a, n // a)
+    rows, cols = (short, long_) if Y <= X else (long_, short)
+    return max(1, min(rows, Y // max(size, 1))), max(1, min(cols, X // max(size, 1)))
+
+
+def choose_regions(g: torch.Tensor, size: int, disparity_power: float, margin: int = 0,
+                   n: int = 1) -> list[tuple[int, int, int, int]]:
+    """Up to ``n`` windows spread over the view: the best of :func:`choose_region` in each cell of a grid.
+
+    Out-of-plane motion (``p_z``) blurs each part of the view by a different
+    amount, in proportion to its distance from the centre, so windows far
+    apart constrain it far better than one window of as many pixels. The
+    view is cut into :func:`region_grid` cells and the window with the
+    largest total :func:`region_score` is chosen inside each (where a cell is
+    smaller than the window, the window may reach into its neighbours).
+
+    Parameters
+    ----------
+    g, size, disparity_power, margin
+        As in :func:`choose_region`.
+    n : int
+        The number of windows wanted (>= 1); fewer where the view holds fewer
+        cells of ``size`` px.
+
+    Returns
+    -------
+    list of (y0, x0, height, width)
+        Row by row; a single ``(0, 0, Y, X)`` when the view is no larger than
+        the window.
+    """
     Y, X = g.shape[2:4]
     h, w = min(size, Y), min(size, X)
     if (h, w) == (Y, X):
-        return 0, 0, Y, X
+        return [(0, 0, Y, X)]
     s = region_score(g, disparity_power)
     integral = np.zeros((Y + 1, X + 1))
     integral[1:, 1:] = s.cumsum(axis=0).cumsum(axis=1)
     step = max(1, size // 8)
 
-    def corners(n, m):
-        lo, hi = (margin, n - m - margin) if n - m - 2 * margin >= 0 else ((n - m) // 2, (n - m) // 2)
+    def corners(n_px, m, a, b):
+        """Corners of an ``m``-px window along an axis of ``n_px``, starting in the cell ``[a, b)``."""
+        lo, hi = (margin, n_px - m - margin) if n_px - m - 2 * margin >= 0 else ((n_px - m) // 2, (n_px - m) // 2)
+        lo, hi = max(lo, min(a, hi)), min(hi, max(b - m, lo))
         return np.unique(np.r_[np.arange(lo, hi + 1, step), hi])
 
-    ys, xs = corners(Y, h), corners(X, w)
-    total = (integral[ys[:, None] + h, xs[None, :] + w] - integral[ys[:, None], xs[None, :] + w]
-             - integral[ys[:, None] + h, xs[None, :]] + integral[ys[:, None], xs[None, :]])
-    i, j = np.unravel_index(int(np.argmax(total)), total.shape)
-    return int(ys[i]), int(xs[j]), h, w
+    rows, cols = region_grid(Y, X, size, n)
+    out = []
+    for r in range(rows):
+        for c in range(cols):
+            ys = corners(Y, h, r * Y // rows, (r + 1) * Y // rows)
+            xs = corners(X, w, c * X // cols, (c + 1) * X // cols)
+            total = (integral[ys[:, None] + h, xs[None, :] + w] - integral[ys[:, None], xs[None, :] + w]
+                     - integral[ys[:, None] + h, xs[None, :]] + integral[ys[:, None], xs[None, :]])
+            i, j = np.unravel_index(int(np.argmax(total)), total.shape)
+            out.append((int(ys[i]), int(xs[j]), h, w))
+    return out
