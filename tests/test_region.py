@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 import torch
 
-from napari_lfdeblur.blind import BlindParams, blind_deblur
+from napari_lfdeblur.blind import BlindParams, blind_deblur, iter_blind_deblur
 from napari_lfdeblur.blind._path_fit import GramLoss
 from napari_lfdeblur.blind._region import choose_region, choose_regions
 from napari_lfdeblur.path import path_in_frame, path_in_window
 from napari_lfdeblur.blur import simulate_blur
 from napari_lfdeblur.metrics import path_error
+from napari_lfdeblur.progress import run_to_completion, with_previews
 from napari_lfdeblur.path import bezier_positions, center_path
 from napari_lfdeblur.samples import synthetic_scene
 
@@ -157,9 +158,23 @@ def test_blind_on_a_large_view_fits_one_path_to_several_windows():
     blurred = simulate_blur(sharp, cp, n_times=32)
     quick = dict(path=dict(n_outer=3, steps=100, n_random=100, n_random_later=40, z_outer=1, region=48, n_regions=4),
                  final={"n_iter": 30}, final_n_times=16, require_evidence=False, n_control_points=3)
-    res = blind_deblur(blurred, params=BlindParams().replace(**quick), device="cpu", seed=0)
+    previews = []
+
+    def collect(rec):
+        if rec.stage.startswith("path") and rec.preview is not None:
+            previews.append(rec.preview)
+
+    gen = with_previews(iter_blind_deblur(blurred, params=BlindParams().replace(**quick), device="cpu", seed=0), 5)
+    res = run_to_completion(gen, collect)
     windows = res.info["windows"]
     assert len(windows) == 4 and res.info["window"] == windows[0]
+    # the previews show every window's latent where it is in the frame (none of them is the first's edge padding,
+    # which is constant along y or along x)
+    assert previews
+    for prev in previews:
+        for y0, x0, h, w in windows:
+            region = prev[:, :, y0:y0 + h, x0:x0 + w]
+            assert np.ptp(region, axis=2).max() > 0 and np.ptp(region, axis=3).max() > 0
     # the path is the frame's: it blurs the whole frame nearly as the true one does, and restores it
     assert path_error(res.control_points, cp, lightfield=sharp).blur_mismatch < 0.25  # measured 0.13
     err_in, err_out = np.abs(blurred - sharp).mean(), np.abs(res.lightfield - sharp).mean()

@@ -240,10 +240,10 @@ def iter_blind_deblur(
     dev = devices.plan_device(dev, need, tiles_possible=True)
     tile = plan_tiles(arr.shape, p, devices.free_memory(dev))
     if tile is not None:
+        where = f"{p.path.region}x{p.path.region} windows" if p.path.region else "the whole view"
         warnings.warn(
-            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than is "
-            f"available: estimating the path on the central {tile[0]}x{tile[1]} pixels and restoring the light "
-            f"field in overlapping tiles of {tile[0]}x{tile[1]}",
+            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than is available: restoring the light "
+            f"field in overlapping tiles of {tile[0]}x{tile[1]} (the path is estimated as usual, on {where})",
             RuntimeWarning,
             stacklevel=2,
         )
@@ -306,24 +306,32 @@ def _make_params(params, overrides) -> BlindParams:
 
 
 @torch.no_grad()
-def _preview(latent: torch.Tensor, fac: int, shape, unshear: float, offset=(0, 0)) -> np.ndarray:
-    """A path-stage latent (V, U, y, x, 1) at level ``fac`` as a light field of the input's ``shape``.
+def _preview(latents, fac: int, shape, unshear: float, offsets=((0, 0),)) -> np.ndarray:
+    """Path-stage latents (V, U, y, x, 1) at level ``fac`` as a light field of the input's ``shape``.
 
-    Nearest upsampling, placed at ``offset`` (the top-left pixel of the crop
-    the path is estimated on) and edge-padded to the full size, the refocus
+    Nearest upsampling, the first latent placed at the first of ``offsets``
+    (the top-left pixel of the window the path is estimated on) and
+    edge-padded to the full size, the others pasted at theirs, the refocus
     of the path stage undone when ``unshear`` is not 0, clipped to [0, 1]
     and repeated over the colour channels: float32, ``shape``.
     """
     V, U, Y, X = shape[:4]
-    lat = latent.detach()[..., 0]
-    if fac > 1:
-        lat = lat.repeat_interleave(fac, dim=2).repeat_interleave(fac, dim=3)
+    ups = []
+    for latent in latents:
+        lat = latent.detach()[..., 0]
+        if fac > 1:
+            lat = lat.repeat_interleave(fac, dim=2).repeat_interleave(fac, dim=3)
+        ups.append(lat)
+    lat = ups[0]
     y, x = lat.shape[2:4]
     if (y, x) != (Y, X):
-        oy, ox = offset
+        oy, ox = offsets[0]
         lat = torch.nn.functional.pad(lat.reshape(V * U, 1, y, x), (ox, X - x - ox, oy, Y - y - oy),
                                       mode="replicate")
         lat = lat.reshape(V, U, Y, X)
+        for other, (oy, ox) in zip(ups[1:], offsets[1:]):
+            h, w = other.shape[2:4]
+            lat[:, :, oy : oy + h, ox : ox + w] = other
     if unshear != 0.0:
         lat = shear(lat[..., None], -unshear)[..., 0]
     out = lat.clamp(0.0, 1.0).to(device="cpu", dtype=torch.float32).numpy()
@@ -368,8 +376,9 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     # several windows: the path stage works in the frame's coordinates from the start
     frames = [(y0, x0, Y, X) for y0, x0, _, _ in windows] if len(windows) > 1 else None
 
-    def preview(latent, fac):
-        return _preview(latent, fac, arr.shape, d_inf if sheared else 0.0, window[:2])
+    def preview(latent, fac):  # one latent, or one per window
+        return _preview(latent if isinstance(latent, list) else [latent], fac, arr.shape,
+                        d_inf if sheared else 0.0, [w[:2] for w in windows])
 
     if p.method == "alternating":
         est = yield from iter_alternating(gs, p, dev, rng, box, preview, frames)

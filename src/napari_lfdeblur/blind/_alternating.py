@@ -57,7 +57,7 @@ def iter_alternating(g, p: BlindParams, device, rng, box: float, preview=None, f
     per_alternation`` (an alternation that ends early jumps to its end), so
     that the fraction done only grows. ``preview(latent, factor)``, when
     given, turns a latent at a pyramid factor into the light-field estimate
-    of the records' ``estimate``.
+    of the records' ``estimate`` (``latent`` a list, one per window).
     """
     gs = list(g) if isinstance(g, (list, tuple)) else [g]
     run = _Alternation(gs, [None] * len(gs) if frames is None else list(frames), p, device, rng, box, preview)
@@ -90,8 +90,8 @@ class _Alternation:
     def record(self, stage, fac, it, cur, latent, loss=float("nan"), **extra) -> Progress:
         n_stages = len(self.stages) + (self.p.motion == "6dof")  # then the rotation stage
         estimate = None
-        if self.preview is not None:  # the first window's latent
-            def estimate(latent=latent[0], fac=fac):
+        if self.preview is not None:
+            def estimate(latent=latent, fac=fac):
                 return self.preview(latent, fac)
         kind = "p_z" if self.stages[stage][1] else "level"
         size = f"{self.Y // fac}x{self.X // fac}" + (f", {len(self.gs)} windows" if len(self.gs) > 1 else "")

@@ -435,7 +435,9 @@ class BlindResult:
     timings : dict
         Seconds spent per stage (``'path'``, ``'final'``, ``'total'``).
     info : dict
-        Extra details (device used, restart scores, levels, ...), and the
+        Extra details (device used, restart scores, levels, the windows
+        of a large view the path was estimated on: ``'windows'``, a list of
+        ``(y0, x0, height, width)``, and ``'window'``, the first), and the
         verdict of the evidence test (docs/blind.md, "What makes it
         robust"): ``'blur_found'`` (bool), ``'evidence'`` (dict of its
         numbers), ``'message'`` (one line for people), ``'restoration'``

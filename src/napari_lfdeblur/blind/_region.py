@@ -9,7 +9,9 @@ scales with ``|d - d_inf|``: points at infinity are not blurred by a
 translation at all). :func:`choose_region` scores every window by the sum,
 over its pixels, of the smaller eigenvalue of the centre view's structure
 tensor (large only where the gradients span two directions; Shi & Tomasi,
-1994) times the fit's own disparity weight, and picks the best.
+1994) times the fit's own disparity weight, and picks the best;
+:func:`choose_regions` picks the best of each part of the view, so that the
+windows spread over it.
 
 :func:`~napari_lfdeblur.path.path_in_frame` carries the path found on the
 window over to the full frame.
