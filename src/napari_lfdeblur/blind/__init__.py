@@ -345,8 +345,8 @@ def _path_windows(arr, d_inf, p: BlindParams, dev, sheared):
 
     Refocused by ``d_inf`` when ``sheared`` (the path fit then uses the
     ``d_inf = 0`` model); cut to :func:`~napari_lfdeblur.blind._region.choose_regions`'
-    windows (``p.path.n_regions`` of them; one for the ``'6dof'`` motion and
-    the ``'joint'`` method) when the views are larger than ``p.path.region``.
+    windows (``p.path_windows()`` of them) when the views are larger than
+    ``p.path.region``.
     """
     Y, X = arr.shape[2:4]
     f = torch.as_tensor(np.ascontiguousarray(arr), dtype=torch.float32, device=dev)
@@ -357,8 +357,7 @@ def _path_windows(arr, d_inf, p: BlindParams, dev, sheared):
     if not p.path.region:
         return [g], [(0, 0, Y, X)]
     margin = math.ceil(abs(d_inf) * (max(arr.shape[:2]) - 1) / 2.0)  # refocused samples read beyond the edge
-    n = p.path.n_regions if p.motion == "3dof" and p.method == "alternating" else 1
-    windows = choose_regions(g, p.path.region, p.path.disparity_weight, margin, n)
+    windows = choose_regions(g, p.path.region, p.path.disparity_weight, margin, p.path_windows())
     if windows == [(0, 0, Y, X)]:
         return [g], windows
     return [g[:, :, y0 : y0 + h, x0 : x0 + w].contiguous() for y0, x0, h, w in windows], windows

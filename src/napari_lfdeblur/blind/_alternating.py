@@ -39,14 +39,14 @@ def pyramid_factors(Y: int, X: int, p: BlindParams) -> list[int]:
     return factors
 
 
-def iter_alternating(g, p: BlindParams, device, rng, box: float, preview=None, frames=None):
-    """Coarse-to-fine salient-edge / path alternation on the grayscale ``g`` (V, U, Y, X, 1), ``d_inf = 0``.
+def iter_alternating(gs, p: BlindParams, device, rng, box: float, preview=None, frames=None):
+    """Coarse-to-fine salient-edge / path alternation on grayscale light fields ``gs``, ``d_inf = 0``.
 
-    ``g`` may also be a list of windows of one view, with ``frames`` their
-    ``(y0, x0, Y_full, X_full)``: each window then has its own latent, the
-    path is fitted to all of them at once (their fits summed), and it is
-    the path of the whole view. Without ``frames`` the path is that of ``g``
-    itself.
+    ``gs`` is a list of ``(V, U, Y, X, 1)`` tensors: one light field, or
+    windows of one view with ``frames`` their ``(y0, x0, Y_full, X_full)``.
+    Each has its own latent, and the path is fitted to all of them at once
+    (their fits summed); with ``frames`` it is the path of the whole view,
+    without, the path of the single light field itself.
 
     A generator: yields a :class:`~napari_lfdeblur.progress.Progress` record
     after every conjugate-gradient iteration of the latent, every
@@ -59,8 +59,7 @@ def iter_alternating(g, p: BlindParams, device, rng, box: float, preview=None, f
     given, turns a latent at a pyramid factor into the light-field estimate
     of the records' ``estimate`` (``latent`` a list, one per window).
     """
-    gs = list(g) if isinstance(g, (list, tuple)) else [g]
-    run = _Alternation(gs, [None] * len(gs) if frames is None else list(frames), p, device, rng, box, preview)
+    run = _Alternation(list(gs), [None] * len(gs) if frames is None else list(frames), p, device, rng, box, preview)
     cp = yield from run.run()
     return PathEstimate(cp, run.factors, len(run.stages), run.history, run.info)
 
@@ -130,7 +129,7 @@ class _Alternation:
             parts.append(GramLoss(f, p.path.n_pixels // len(fs), rng, p.n_times, self.box,
                                   self.box * p.path.z_box if free_z else 0.0, p.path.tiles if free_z else 1,
                                   weight=self.disparity.get((fac, i)), frame=frame))
-        sub = parts[0] if len(parts) == 1 else SumLoss(parts)
+        sub = SumLoss(parts)
         if latent is None or latent[0].shape != fs[0].shape:
             latent = [f.clone() for f in fs]
         cur = np.zeros((n_lvl, 3)) if cp is None else elevate_degree(cp, n_lvl)
@@ -143,7 +142,7 @@ class _Alternation:
             sigma = edge_sigmas(p.latent) if outer >= es_from else (0.0, 0.0)
             base, tick = (outer - 1) * self.per_outer, [0]
             latent = yield from self.latent_step(stage, fs, frames, cur, latent, lam, sigma, base, tick, outer)
-            sub.set_latent(latent[0] if len(parts) == 1 else latent, None if first else cur, p.path.robust, sigma)
+            sub.set_latent(latent, None if first else cur, p.path.robust, sigma)
             candidates = self.candidates(first, cur, n_lvl, free_z, starts)
             loss, new = yield from self.fit_step(stage, fac, sub, candidates, free_z, latent, lam, base, tick, outer,
                                                  first)

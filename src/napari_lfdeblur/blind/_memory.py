@@ -45,7 +45,7 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     final = n * 4 * (FINAL_TENSORS * group + C)
     r = p.path.region
     ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
-    rows, cols = region_grid(Y, X, r, p.path.n_regions) if r and (ny, nx) != (Y, X) else (1, 1)
+    rows, cols = region_grid(Y, X, r, p.path_windows()) if r and (ny, nx) != (Y, X) else (1, 1)
     # the full-size input and its grayscale (and refocused) copies, then the windows' path stage: each
     # window's f and latent, and one window's CG vectors, gradients and autograd buffers (grayscale)
     path = n * C * 4 + n * 4 * 2 + V * U * ny * nx * 4 * (2 * rows * cols + 14)

@@ -216,8 +216,9 @@ class PathFitParams(JsonParams):
     _what = "blind path fit"
 
     def __post_init__(self):
-        ints = {"region": 0, "n_regions": 1, "n_levels": 1, "min_size": 4, "max_size": 0, "n_outer": 1, "n_restarts": 1, "steps": 1,
-                "n_pixels": 16, "n_random": 0, "n_random_later": 0, "n_perturb": 0, "tiles": 1, "z_outer": 0}
+        ints = {"region": 0, "n_regions": 1, "n_levels": 1, "min_size": 4, "max_size": 0, "n_outer": 1,
+                "n_restarts": 1, "steps": 1, "n_pixels": 16, "n_random": 0, "n_random_later": 0, "n_perturb": 0,
+                "tiles": 1, "z_outer": 0}
         _check(self, "BlindParams.path", ints=ints,
                nonneg=("init_length", "tol", "robust", "perturb", "disparity_weight", "z_box"),
                positive=("lr",), bools=("try_mirror", "estimate_z"))
@@ -391,6 +392,11 @@ class BlindParams(JsonParams):
         """The bound of the estimated control points for ``V x U`` views, views: ``max_extent``, or
         ``max(0.5, 0.35 (min(V, U) - 1))`` when it is 0."""
         return self.max_extent if self.max_extent > 0 else max(0.5, 0.35 * (min(V, U) - 1))
+
+    def path_windows(self) -> int:
+        """How many windows the path stage asks for on a view larger than ``path.region``:
+        ``path.n_regions``, or 1 for the ``'6dof'`` motion and the ``'joint'`` method."""
+        return self.path.n_regions if self.motion == "3dof" and self.method == "alternating" else 1
 
     @classmethod
     def preset(cls, name: str) -> "BlindParams":

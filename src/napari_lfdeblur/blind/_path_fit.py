@@ -225,7 +225,7 @@ class GramLoss:
 
 
 class SumLoss:
-    """The sum of several :class:`GramLoss` fits of one path (windows of one view, each with its latent)."""
+    """The sum of :class:`GramLoss` fits of one path (one light field, or windows of one view; each its own latent)."""
 
     def __init__(self, parts):
         self.parts = list(parts)
