@@ -22,7 +22,7 @@ from napari_lfdeblur import (
 from napari_lfdeblur.progress import run_to_completion, with_previews
 from napari_lfdeblur.blur import BlurOperator, from_tensor, to_tensor
 from napari_lfdeblur import _noise
-from napari_lfdeblur.deconvolution import COLOUR_WEIGHT_FACTOR, NOISE_WEIGHT_FACTOR, estimate_noise_sigma
+from napari_lfdeblur.deconvolution import N_INNER, COLOUR_WEIGHT_FACTOR, NOISE_WEIGHT_FACTOR, estimate_noise_sigma
 from napari_lfdeblur.priors import divergence4d, gradient4d, gradient_norm_bound, project_tv_dual, tv4d
 from napari_lfdeblur.special_cases import inplane_matrix, inplane_psf
 
@@ -219,25 +219,27 @@ def test_a_cancelled_tv_solve_stops_inside_the_iteration(monkeypatch):
     calls = []
     real = _tv_solvers.project_tv_dual
 
-    def counting(*args, **kwargs):  # one inner iteration of the TV prox; the 7th asks to stop
+    n_inner = N_INNER
+
+    def counting(*args, **kwargs):  # one inner iteration of the TV prox; the second of iteration 2 asks to stop
         calls.append(stop.is_set())
-        if len(calls) == 7:
+        if len(calls) == n_inner + 2:
             stop.set()
         return real(*args, **kwargs)
 
     monkeypatch.setattr(_tv_solvers, "project_tv_dual", counting)
-    gen = iter_deconvolve(lf, cp, n_times=4, n_iter=50, tol=0.0)  # 5 inner iterations per iteration
+    gen = iter_deconvolve(lf, cp, n_times=4, n_iter=50, tol=0.0)  # n_inner inner iterations per iteration
     with cancellable(stop):
-        assert next(gen).iteration == 1 and len(calls) == 5
+        assert next(gen).iteration == 1 and len(calls) == n_inner
         with pytest.raises(Cancelled):
             next(gen)
     # it stopped right after the inner iteration that set the event, inside iteration 2
-    assert len(calls) == 7 and not any(calls)
+    assert len(calls) == n_inner + 2 and not any(calls)
     # outside a cancellable context the checks do nothing, though the event is still set
     calls.clear()
     records = []
     out = run_to_completion(iter_deconvolve(lf, cp, n_times=4, n_iter=3, tol=0.0), records.append)
-    assert len(records) == 3 and len(calls) == 15 and out.shape == lf.shape
+    assert len(records) == 3 and len(calls) == 3 * n_inner and out.shape == lf.shape
 
 
 def test_zero_weight_tv_fits_the_data():
@@ -401,6 +403,11 @@ def test_noise_estimate_and_the_default_weight_grow_with_the_noise():
         weights.append(info["weight"])
     assert weights[0] < weights[1] < weights[2]
     assert errors[2] < errors[0] and errors[2] < 0.03
+    # a given weight: no noise estimate is made
+    gen = iter_deconvolve(noisy, cp, n_times=8, method="tv", weight=0.01, n_iter=1)
+    info = next(gen).info
+    gen.close()
+    assert info["sigma"] is None and info["weight"] == 0.01
     assert DeconvolutionParams(weight=0.05).effective_weight("tv", 0.01) == 0.05  # an explicit weight wins
     assert DeconvolutionParams().effective_weight("inplane") == 2e-3
     with pytest.raises(ValueError, match="sigma"):

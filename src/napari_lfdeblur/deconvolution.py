@@ -86,8 +86,8 @@ NOISE_WEIGHT_FACTOR = 0.3
 #: the factor of the colour TV (``couple_channels`` on more than one channel); near ``sqrt(3)`` times
 #: NOISE_WEIGHT_FACTOR, as the colour TV of grey edges is ``sqrt(3)`` times smaller than three separate TVs
 COLOUR_WEIGHT_FACTOR = 0.45
-#: inner (dual) iterations of the TV proximal map per outer iteration
-N_INNER = 5
+#: inner (dual) iterations of the warm-started TV proximal map per outer iteration (docs/deconvolution.md)
+N_INNER = 3
 
 
 # ------------------------------------------------------------ parameters
@@ -325,7 +325,7 @@ def iter_deconvolve(
 
 
 def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
-    sigma = estimate_noise_sigma(arr) if method == "tv" else None
+    sigma = estimate_noise_sigma(arr) if method == "tv" and p.weight is None else None  # the weight rule's
     weight = p.effective_weight(method, sigma, arr.shape[4] if arr.ndim == 5 else 1)
     f = to_tensor(arr, device=dev)
     if method == "inplane":
