@@ -219,27 +219,25 @@ def test_a_cancelled_tv_solve_stops_inside_the_iteration(monkeypatch):
     calls = []
     real = _tv_solvers.project_tv_dual
 
-    n_inner = N_INNER
-
     def counting(*args, **kwargs):  # one inner iteration of the TV prox; the second of iteration 2 asks to stop
         calls.append(stop.is_set())
-        if len(calls) == n_inner + 2:
+        if len(calls) == N_INNER + 2:
             stop.set()
         return real(*args, **kwargs)
 
     monkeypatch.setattr(_tv_solvers, "project_tv_dual", counting)
-    gen = iter_deconvolve(lf, cp, n_times=4, n_iter=50, tol=0.0)  # n_inner inner iterations per iteration
+    gen = iter_deconvolve(lf, cp, n_times=4, n_iter=50, tol=0.0)  # N_INNER inner iterations per iteration
     with cancellable(stop):
-        assert next(gen).iteration == 1 and len(calls) == n_inner
+        assert next(gen).iteration == 1 and len(calls) == N_INNER
         with pytest.raises(Cancelled):
             next(gen)
     # it stopped right after the inner iteration that set the event, inside iteration 2
-    assert len(calls) == n_inner + 2 and not any(calls)
+    assert len(calls) == N_INNER + 2 and not any(calls)
     # outside a cancellable context the checks do nothing, though the event is still set
     calls.clear()
     records = []
     out = run_to_completion(iter_deconvolve(lf, cp, n_times=4, n_iter=3, tol=0.0), records.append)
-    assert len(records) == 3 and len(calls) == 3 * n_inner and out.shape == lf.shape
+    assert len(records) == 3 and len(calls) == 3 * N_INNER and out.shape == lf.shape
 
 
 def test_zero_weight_tv_fits_the_data():

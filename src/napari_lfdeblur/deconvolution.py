@@ -325,7 +325,7 @@ def iter_deconvolve(
 
 
 def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
-    sigma = estimate_noise_sigma(arr) if method == "tv" and p.weight is None else None  # the weight rule's
+    sigma = estimate_noise_sigma(arr) if method == "tv" and p.weight is None else None  # for the weight rule
     weight = p.effective_weight(method, sigma, arr.shape[4] if arr.ndim == 5 else 1)
     f = to_tensor(arr, device=dev)
     if method == "inplane":
