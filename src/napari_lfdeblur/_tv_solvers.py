@@ -180,11 +180,12 @@ def _dist2(a, b, buf) -> float:
 
 
 @torch.no_grad()
-def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, box, n_inner=5, lip=1.0,
+def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, box, n_inner, lip=1.0,
                   record=None, coupled=False):
     """FISTA iterations; yields ``record(iteration, x, info)``, returns the last ``x``.
 
-    ``box`` is None or ``(lo, hi)``. ``lip`` is the first estimate of the
+    ``box`` is None or ``(lo, hi)``; ``n_inner``: the inner iterations of the
+    :class:`TVProx` per iteration. ``lip`` is the first estimate of the
     Lipschitz constant ``||K||^2`` of the data gradient; it is raised whenever
     the curvature seen along a step, ``||K d||^2 / ||d||^2``, exceeds it (the
     step is then redone), which costs no extra blur evaluation when the
