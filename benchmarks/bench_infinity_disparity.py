@@ -10,8 +10,10 @@ random path with ``p_z != 0``: the time to build the operator (its kernel),
 one forward plus one adjoint (what a non-blind solver iteration costs), and
 forward+backward with gradients for the light field and the path (what a
 blind path fit costs); the peak memory above the light field during
-forward+backward, in units of the light field's size; and the number of
-taps of the kernel. Each ``(T, d_inf)`` runs in its own subprocess, so peaks
+forward+backward, in units of the light field's size; the number of
+taps of the kernel; and forward plus adjoint against the memory-traffic
+floor (each must read and write one light field at least: twice the time
+of a plain copy of the light field on the device). Each ``(T, d_inf)`` runs in its own subprocess, so peaks
 don't mix. The cost ratio is against ``d_inf = 0`` at the same ``T``.
 The table goes to ``docs/benchmarks/bench_infinity_disparity.md`` (or ``--out``).
 """
@@ -70,6 +72,12 @@ def measure(shape, n_times, d_inf, device, repeats, rotation=None):
     with torch.no_grad():
         op.adjoint(op.forward(L))  # warm-up
         t_fa = timed(lambda: op.adjoint(op.forward(L)))
+        # the memory-traffic floor: a forward and an adjoint each read one light field and write one, at
+        # least; a plain copy of the light field (read + write) measures what that costs on this device
+        dst = torch.empty_like(L)
+        dst.copy_(L)
+        t_copy = min(timed(lambda: dst.copy_(L)) for _ in range(3))
+        del dst
 
     def fwd_bwd():
         Lg = L.detach().requires_grad_(True)
@@ -92,7 +100,7 @@ def measure(shape, n_times, d_inf, device, repeats, rotation=None):
         peak = max(peak, extra / lf_bytes)
         del grads
     return {"n_times": n_times, "d_inf": d_inf, "device": str(device), "build_s": t_build,
-            "fwd_adj_s": t_fa, "fwd_bwd_s": t_fb, "peak_extra_x_lf": peak, "taps": n_taps,
+            "fwd_adj_s": t_fa, "fwd_bwd_s": t_fb, "peak_extra_x_lf": peak, "taps": n_taps, "copy_s": t_copy,
             "lf_mb": lf_bytes / 2**20}
 
 
@@ -133,7 +141,8 @@ def main(argv=None):
 
 def _line(r) -> str:
     return (f"| {r['n_times']} | {r['d_inf']:+.1f} | {r['taps']} | {r['build_s']:.3f} | {r['fwd_adj_s']:.3f} | "
-            f"{r['ratio_fwd_adj']:.2f} | {r['fwd_bwd_s']:.3f} | {r['ratio_fwd_bwd']:.2f} | {r['peak_extra_x_lf']:.2f} |")
+            f"{r['ratio_fwd_adj']:.2f} | {2000 * r['copy_s']:.3g} | {r['fwd_adj_s'] / (2 * r['copy_s']):.1f} | "
+            f"{r['fwd_bwd_s']:.3f} | {r['ratio_fwd_bwd']:.2f} | {r['peak_extra_x_lf']:.2f} |")
 
 
 def _write(rows, shape, args, argv, device):
@@ -142,12 +151,15 @@ def _write(rows, shape, args, argv, device):
         f"4-point path with `p_z != 0` (extent 3 views); best of {args.repeats} runs. *Build*: making the "
         "operator (its kernel). *Forward + adjoint*: one of each, as a non-blind iteration does. *Forward + "
         "backward*: loss `0.5 ||f - b||^2` with gradients for the light field and the path, as a blind path fit "
-        "does. Ratios are against `d_inf = 0` at the same `T`. Peak memory: above the light field, target and "
-        "path during forward+backward, in units of the light field's size.",
+        "does. Ratios are against `d_inf = 0` at the same `T`. *Floor*: the memory-traffic floor of a forward "
+        "plus an adjoint, each of which must read one light field and write one: twice the time of a plain copy "
+        "of the light field on the device (`dst.copy_(src)`, best of 3 x the runs), which measures the "
+        "bandwidth actually available; *x floor*: forward + adjoint over that floor. Peak memory: above the "
+        "light field, target and path during forward+backward, in units of the light field's size.",
         "",
-        "| T | d_inf | taps | build (s) | forward + adjoint (s) | ratio | forward + backward (s) | ratio "
-        "| peak extra memory (x light field) |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| T | d_inf | taps | build (s) | forward + adjoint (s) | ratio | floor (ms) | x floor | "
+        "forward + backward (s) | ratio | peak extra memory (x light field) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
         *[_line(r) for r in rows],
     ]
     _report.write_table(_report.table_path(args.out, __file__), "Blur operator at non-zero infinity disparity",
