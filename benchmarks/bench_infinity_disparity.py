@@ -13,8 +13,8 @@ blind path fit costs); the peak memory above the light field during
 forward+backward, in units of the light field's size; the number of
 taps of the kernel; and forward plus adjoint against the memory-traffic
 floor (each must read and write one light field at least: twice the time
-of a plain copy of the light field on the device). Each ``(T, d_inf)`` runs in its own subprocess, so peaks
-don't mix. The cost ratio is against ``d_inf = 0`` at the same ``T``.
+of a plain copy of the light field on the device). Each ``(T, d_inf)``
+runs in its own subprocess, so peaks don't mix. The cost ratio is against ``d_inf = 0`` at the same ``T``.
 The table goes to ``docs/benchmarks/bench_infinity_disparity.md`` (or ``--out``).
 """
 
