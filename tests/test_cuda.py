@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 import torch
 
-from napari_lfdeblur import blind_deblur, deconvolve, random_path, simulate_blur, synthetic_scene
+from napari_lfdeblur import blind_deblur, deconvolve, random_path, simulate_blur
 from napari_lfdeblur.blind import BlindParams
 from napari_lfdeblur.blur import BlurOperator
 from napari_lfdeblur.path import linear_path
 from test_blind import FAST, _scene
+from test_deconvolution import tv_case
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
 
@@ -64,10 +65,7 @@ def test_path_gradient_on_the_gpu_matches_the_cpu(motion):
 
 @pytest.mark.parametrize("d_inf", [0.0, 1.0])
 def test_tv_deconvolution_on_the_gpu_matches_the_cpu(d_inf):
-    lf, _ = synthetic_scene((5, 5, 24, 24), seed=2)
-    cp = random_path(3, extent=2.5, z_extent=2.0, seed=3)
-    noise = np.random.default_rng(0).normal(0, 0.005, lf.shape).astype(np.float32)
-    blurred = simulate_blur(lf, cp, n_times=8, infinity_disparity=d_inf) + noise
+    lf, cp, blurred = tv_case(d_inf)
     out = {dev: deconvolve(blurred, cp, n_times=8, infinity_disparity=d_inf, device=dev) for dev in ("cpu", "cuda")}
     assert out["cuda"].dtype == np.float32 and out["cuda"].shape == lf.shape
     # the same iterations up to rounding (the GPU sweeps the whole field as one block of rows)
