@@ -67,42 +67,146 @@ def tile_side(shape, block_elements: int) -> int:
     return int(min(64, max(16, side)))
 
 
-def _tile_kernel(shifts, sizes, n_times):
-    """The kernel of one tile from its per-instant shifts along (v, y, u, x).
+def _lookups(shifts, sizes):
+    """Where one tile's bilinear lookups along (v, y, u, x) fall in the box of integer offsets they use.
 
-    ``shifts`` are broadcastable to ``(T, h, w)``. Returns ``K (S, h, w)``
-    and the ``(S, 4)`` integer offsets of its taps.
+    ``shifts`` are broadcastable to ``(T, h, w)``. Returns ``base`` (int32,
+    ``(T, h, w)``, the flat code of each lookup's lowest corner in the box),
+    ``delta`` (the code offsets of the 16 corners, in the order of
+    ``_CORNERS``), the four fractions (each of its shift's shape), and the
+    lowest offset and the width of the box along each axis.
     """
     taps = [axis_taps(s, n) for s, n in zip(shifts, sizes)]
     full = torch.broadcast_shapes(*(o.shape for o, _ in taps))
-    offs = [o.expand(full) for o, _ in taps]
-    fracs = [f.expand(full) for _, f in taps]
-    lo = [int(o.min()) for o in offs]
-    width = [int(o.max()) - m + 2 for o, m in zip(offs, lo)]
-    base = torch.zeros(full, dtype=torch.long, device=offs[0].device)
-    for o, m, w in zip(offs, lo, width):
-        base = base * w + (o - m)
+    lo = [int(o.min()) for o, _ in taps]
+    width = [int(o.max()) - m + 2 for (o, _), m in zip(taps, lo)]
+    base = torch.zeros(full, dtype=torch.int32, device=taps[0][0].device)
+    for (o, _), m, w in zip(taps, lo, width):
+        base = base * w + (o - m).to(torch.int32)
     strides = [width[1] * width[2] * width[3], width[2] * width[3], width[3], 1]
-    delta = torch.tensor([sum(b * s for b, s in zip(bits, strides)) for bits in _CORNERS], device=base.device)
-    codes = base[..., None] + delta  # (T, h, w, 16)
-    weights = torch.stack(
-        [math.prod(f if bit else 1.0 - f for f, bit in zip(fracs, bits)) for bits in _CORNERS], dim=-1
-    )
-    # the offsets some corner touches (a zero weight still carries a gradient)
-    used = torch.zeros(math.prod(width), dtype=torch.bool, device=base.device)
-    used[codes.reshape(-1)] = True
+    delta = [sum(b * s for b, s in zip(bits, strides)) for bits in _CORNERS]
+    return base, delta, [f for _, f in taps], lo, width
+
+
+def _corner_weights(fracs):
+    """The 16 bilinear weights of each lookup, ``(16, T, h, w)``: products of one factor per axis."""
+    w = None
+    for f in fracs:
+        pair = torch.stack(torch.broadcast_tensors(1.0 - f, f))  # (2, ...)
+        w = pair if w is None else (w[:, None] * pair[None]).flatten(0, 1)
+    return w
+
+
+def _tile_kernel(shifts, sizes, n_times):
+    """The kernel of one tile from its per-instant shifts along (v, y, u, x).
+
+    ``shifts`` are broadcastable to ``(T, h, w)``. Returns ``K (S, h, w)``,
+    the ``(S, 4)`` integer offsets of its taps and, for its gradient,
+    where each of the 16 corners of each lookup lands in ``K`` (int32,
+    ``(16, T, h, w)``).
+    """
+    base, delta, fracs, lo, width = _lookups(shifts, sizes)
+    h, w = base.shape[1:]
+    n = math.prod(width)
+    # the offsets some corner touches (a zero weight still carries a gradient): the lowest corners'
+    # codes, moved by each corner's offset
+    lowest = torch.zeros(n, dtype=torch.bool, device=base.device)
+    lowest[base.reshape(-1)] = True
+    used = torch.zeros_like(lowest)
+    for d in delta:
+        used[d:] |= lowest[: n - d]
     active = used.nonzero().squeeze(1)
-    slot = torch.cumsum(used.long(), 0) - 1
-    h, w = full[1], full[2]
-    n_pix = h * w
-    pix = torch.arange(n_pix, device=base.device).view(1, h, w, 1)
-    index = (slot[codes] * n_pix + pix).reshape(-1)
-    K = weights.new_zeros(len(active) * n_pix).index_add(0, index, weights.reshape(-1)) / n_times
+    slot = (torch.cumsum(used, 0, dtype=torch.int32) - 1) * (h * w)
+    pix = torch.arange(h * w, dtype=torch.int32, device=base.device).view(1, h, w)
+    index = torch.stack([slot[d:][base] + pix for d in delta])
+    weights = _corner_weights(fracs)
+    K = weights.new_zeros(len(active) * h * w).index_add_(0, index.view(-1), weights.reshape(-1)) / n_times
     offsets = []
     for m, wd in zip(lo[::-1], width[::-1]):
         offsets.append(active % wd + m)
         active = active // wd
-    return K.view(-1, h, w), torch.stack(offsets[::-1], dim=1)
+    return K.view(-1, h, w), torch.stack(offsets[::-1], dim=1), index
+
+
+def _contract(g, f):
+    """``g[0] (1 - f) + g[1] f`` and ``g[1] - g[0]``: the weighted sum over an axis's two corners, and its
+    derivative in ``f``."""
+    return g[0] + (g[1] - g[0]) * f, g[1] - g[0]
+
+
+def _tile_shift_grads(gK, shifts, sizes, index):
+    """The gradient of ``<gK, K>`` with respect to each of the tile's four shifts (each of its shape).
+
+    ``gK`` is the tile's ``(S, h, w)`` kernel gradient, already divided by
+    ``T``. Each weight is a product of one factor per axis, ``1 - f`` or
+    ``f``, so the derivative along an axis is the difference of the
+    gathered gradients of its two corners, weighted by the other axes'
+    factors; the corners are summed out one axis at a time (x, u, y, v).
+    ``f`` follows its shift within the clamped range, and not beyond
+    (:func:`axis_taps`).
+    """
+    fv, fy, fu, fx = (axis_taps(s, n)[1] for s, n in zip(shifts, sizes))
+    g = gK.reshape(-1)[index].view((2, 2, 2, 2) + index.shape[1:])  # (v, y, u, x) corners
+    g, dx = _contract(g.movedim(3, 0), fx)  # (v, y, u) corners each
+    g, du = _contract(g.movedim(2, 0), fu)
+    dx, _ = _contract(dx.movedim(2, 0), fu)
+    g, dy = _contract(g.movedim(1, 0), fy)
+    du, _ = _contract(du.movedim(1, 0), fy)
+    dx, _ = _contract(dx.movedim(1, 0), fy)
+    dv = g[1] - g[0]
+    dy, du, dx = (_contract(t, fv)[0] for t in (dy, du, dx))
+    grads = []
+    for d, s, n in zip((dv, dy, du, dx), shifts, sizes):
+        lim = n - 1.0
+        d = d * ((s >= -lim) & (s <= lim) & (n > 1)).to(d.dtype)
+        grads.append(d.sum_to_size(s.shape))
+    return grads
+
+
+class _TiledKernel(torch.autograd.Function):
+    """:func:`tiled_kernel`'s kernels with an analytic gradient in the shifts.
+
+    The forward pass keeps, per tile, only where each corner of each lookup
+    landed in the kernel (int32); the backward pass recomputes the
+    fractions and gathers the kernel's gradient there. Autograd's own
+    record of the 16 weights of every lookup, and of the products that make
+    them, is many times the light field's size on a whole view.
+    """
+
+    @staticmethod
+    def forward(ctx, s_v, s_u, t_y, t_x, shape, side, layout):
+        V, U, Y, X = shape[:4]
+        T = s_v.shape[0]
+        parts, tiles, start = [], [], 0
+        for y0 in range(0, Y, side):
+            rows = slice(y0, min(Y, y0 + side))
+            for x0 in range(0, X, side):
+                cols = slice(x0, min(X, x0 + side))
+                shifts = (s_v[:, rows, None], t_y[:, rows, cols], s_u[:, None, cols], t_x[:, rows, cols])
+                Kt, offsets, index = _tile_kernel(shifts, (V, Y, U, X), T)
+                parts.append(Kt.reshape(-1))
+                layout.append((rows, cols, start, offsets))
+                tiles.append((rows, cols, start, Kt.shape, index))
+                start += Kt.numel()
+        ctx.save_for_backward(s_v, s_u, t_y, t_x)
+        ctx.tiles, ctx.sizes = tiles, (V, Y, U, X)
+        return torch.cat(parts)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, gK):
+        s_v, s_u, t_y, t_x = ctx.saved_tensors
+        grads = [torch.zeros_like(t) for t in (s_v, s_u, t_y, t_x)]
+        gK = gK / s_v.shape[0]
+        for rows, cols, start, kshape, index in ctx.tiles:
+            g = gK[start : start + math.prod(kshape)].view(kshape)
+            shifts = (s_v[:, rows, None], t_y[:, rows, cols], s_u[:, None, cols], t_x[:, rows, cols])
+            gv, gy, gu, gx = _tile_shift_grads(g, shifts, ctx.sizes, index)
+            grads[0][:, rows] += gv[:, :, 0]
+            grads[1][:, cols] += gu[:, 0, :]
+            grads[2][:, rows, cols] += gy
+            grads[3][:, rows, cols] += gx
+        return (*grads, None, None, None)
 
 
 def tiled_kernel(s_v, s_u, t_y, t_x, shape, side: int):
@@ -130,19 +234,10 @@ def tiled_kernel(s_v, s_u, t_y, t_x, shape, side: int):
         Per tile: its rows, its columns, where its ``(S, h, w)`` kernel
         starts in ``K``, and its ``(S, 4)`` offsets of ``(v, y, u, x)``.
     """
-    V, U, Y, X = shape[:4]
-    T = s_v.shape[0]
-    parts, layout, start = [], [], 0
-    for y0 in range(0, Y, side):
-        rows = slice(y0, min(Y, y0 + side))
-        for x0 in range(0, X, side):
-            cols = slice(x0, min(X, x0 + side))
-            shifts = (s_v[:, rows, None], t_y[:, rows, cols], s_u[:, None, cols], t_x[:, rows, cols])
-            Kt, offsets = _tile_kernel(shifts, (V, Y, U, X), T)
-            parts.append(Kt.reshape(-1))
-            layout.append((rows, cols, start, offsets))
-            start += Kt.numel()
-    return torch.cat(parts), layout
+    layout = []
+    t_y, t_x = (torch.broadcast_to(t, (s_v.shape[0], shape[2], shape[3])) for t in (t_y, t_x))
+    K = _TiledKernel.apply(s_v, s_u, t_y, t_x, tuple(shape), side, layout)
+    return K, layout
 
 
 def _clamped_range(start: int, stop: int, size: int, device):
