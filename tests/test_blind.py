@@ -657,17 +657,41 @@ def test_memory_estimate_grows_with_size():
     assert big > 9 * 9 * 376 * 541 * 3 * 4 * 5
 
 
-def test_device_falls_back_to_cpu_when_memory_is_short(monkeypatch):
-    monkeypatch.setattr(devices, "free_memory", lambda device: 1024)
-    with pytest.warns(RuntimeWarning, match="CPU instead"):
-        dev = devices.plan_device(torch.device("cuda"), 10**9)
-    assert dev.type == "cpu"
-    with pytest.warns(RuntimeWarning, match="may fail"):
-        assert devices.plan_device(torch.device("cpu"), 10**9).type == "cpu"
-    monkeypatch.setattr(devices, "free_memory", lambda device: 10**12)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        assert devices.plan_device(torch.device("cuda"), 10**9).type == "cuda"
+def test_plan_run_tiles_on_the_gpu_or_falls_back_to_the_cpu():
+    shape = (9, 9, 600, 800, 3)
+    p = BlindParams()
+    gpu, cpu = torch.device("cuda"), torch.device("cpu")
+    whole = blind.estimate_blind_memory(shape, p)
+    path_stage = _memory._memory_of_stages(shape, p)[1]
+    assert path_stage < whole
+    # enough, or unknown: as asked, whole
+    assert _memory.plan_run(shape, p, gpu, lambda d: whole) == (gpu, None)
+    assert _memory.plan_run(shape, p, gpu, lambda d: None) == (gpu, None)
+    # the path stage fits on the GPU but the whole does not: the GPU restores in tiles, whose results go to the
+    # host; a CPU with as much memory also holds the result
+    free = (path_stage + whole) // 2
+    dev, tile = _memory.plan_run(shape, p, gpu, lambda d: free)
+    assert dev == gpu and tile is not None and tile[0] < 600
+    assert _memory._tile_memory(shape, p, tile) <= free
+    result = 4 * 9 * 9 * 600 * 800 * 3
+    dev, cpu_tile = _memory.plan_run(shape, p, cpu, lambda d: free)
+    assert dev == cpu and _memory._tile_memory(shape, p, cpu_tile) + result <= free
+    assert cpu_tile[0] <= tile[0] and cpu_tile[1] <= tile[1]
+    # the GPU cannot hold the path stage: the run goes to the CPU, tiled by the CPU's memory
+    host = {"cuda": path_stage // 2, "cpu": whole // 3}
+    dev, tile = _memory.plan_run(shape, p, gpu, lambda d: host[d.type])
+    assert dev == cpu and tile == _memory.plan_tiles(shape, p, whole // 3)
+    assert _memory.plan_run(shape, p, gpu, lambda d: {"cuda": path_stage // 2, "cpu": None}[d.type]) == (cpu, None)
+
+
+def test_blind_deblur_says_where_it_runs_when_memory_is_short(monkeypatch):
+    blurred = np.random.default_rng(0).random((3, 3, 16, 16), dtype=np.float32)
+    monkeypatch.setattr(devices, "select_device", lambda device: torch.device("cuda"))
+    monkeypatch.setattr(devices, "free_memory", lambda device: {"cuda": 1024, "cpu": None}[device.type])
+    monkeypatch.setattr(blind, "_run", lambda arr, d_inf, p, dev, seed, tile: iter([dev]))
+    with pytest.warns(RuntimeWarning, match="running on the CPU instead"):
+        gen = iter_blind_deblur(blurred)
+    assert next(gen) == torch.device("cpu")
 
 
 def test_plan_tiles_fits_the_budget():

@@ -48,18 +48,3 @@ def test_cpu_fallback_passes_a_cpu_run_through_and_reraises_cpu_errors():
 
     with pytest.raises(torch.cuda.OutOfMemoryError):  # no fall-back from the CPU itself
         run_to_completion(run_with_cpu_fallback(failing, torch.device("cpu")))
-
-
-def test_plan_device_keeps_a_device_with_enough_memory(monkeypatch):
-    import warnings
-
-    from napari_lfdeblur import devices
-
-    monkeypatch.setattr(devices, "free_memory", lambda device: None)  # unknown: keep the device, silently
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        assert devices.plan_device(torch.device("cpu"), 10**15).type == "cpu"
-    monkeypatch.setattr(devices, "free_memory", lambda device: 10)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # a shortage on the CPU with tiles possible: the caller tiles
-        assert devices.plan_device(torch.device("cpu"), 10**6, tiles_possible=True).type == "cpu"

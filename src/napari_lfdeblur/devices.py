@@ -8,7 +8,7 @@ import torch
 
 from ._memory import host_available_memory
 
-__all__ = ["select_device", "free_memory", "plan_device", "empty_cache", "run_with_cpu_fallback"]
+__all__ = ["select_device", "free_memory", "empty_cache", "run_with_cpu_fallback"]
 
 _CHOICES = ("auto", "cpu", "cuda")
 
@@ -63,41 +63,6 @@ def free_memory(device: str | torch.device | None = "auto") -> int | None:
         free, _ = torch.cuda.mem_get_info(dev)
         return int(free)
     return host_available_memory()
-
-
-def plan_device(device: torch.device, need: int, tiles_possible: bool = False, what: str = "blind deblurring"
-                ) -> torch.device:
-    """The device to run on, given an estimate of the memory needed (bytes).
-
-    A CUDA device without ``need`` bytes free (by :func:`free_memory`) falls
-    back to the CPU with a :class:`RuntimeWarning`; on the CPU a shortage is
-    only warned about (unless ``tiles_possible``: the caller then works in
-    tiles). ``what`` names the job in the warnings.
-
-    Returns
-    -------
-    torch.device
-    """
-    free = free_memory(device)
-    if free is None or need <= free:
-        return device
-    if device.type != "cuda" and tiles_possible:
-        return device
-    if device.type == "cuda":
-        warnings.warn(
-            f"{what} needs about {need / 2**30:.2f} GiB but {device} has {free / 2**30:.2f} GiB free: "
-            "running on the CPU instead",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-        return torch.device("cpu")
-    warnings.warn(
-        f"{what} needs about {need / 2**30:.2f} GiB but only {free / 2**30:.2f} GiB of memory is "
-        "available: it may fail or swap; crop the light field to be safe",
-        RuntimeWarning,
-        stacklevel=3,
-    )
-    return device
 
 
 def empty_cache(device: torch.device) -> None:

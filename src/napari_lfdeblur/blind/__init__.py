@@ -102,7 +102,7 @@ from ._alternating import iter_alternating, relay
 from ._disparity import gray, shear
 from ._evidence import blur_evidence, evidence_message
 from ._joint import iter_joint
-from ._memory import TILE_MARGIN, estimate_blind_memory, plan_tiles, tiles
+from ._memory import TILE_MARGIN, estimate_blind_memory, plan_run, tiles
 from ._region import choose_regions
 from ._rotation import iter_rotation_fit
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams, RotationFitParams
@@ -235,15 +235,17 @@ def iter_blind_deblur(
     p = _make_params(params, overrides)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be an integer; got {seed!r}")
-    dev = devices.select_device(device)
+    asked = devices.select_device(device)
     need = estimate_blind_memory(arr.shape, p)
-    dev = devices.plan_device(dev, need, tiles_possible=True)
-    tile = plan_tiles(arr.shape, p, devices.free_memory(dev))
+    dev, tile = plan_run(arr.shape, p, asked, devices.free_memory)
+    if dev != asked:
+        warnings.warn(f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {asked} has free, even "
+                      "in tiles: running on the CPU instead", RuntimeWarning, stacklevel=2)
     if tile is not None:
         where = f"{p.path.region}x{p.path.region} windows" if p.path.region else "the whole view"
         warnings.warn(
-            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than is available: restoring the light "
-            f"field in overlapping tiles of {tile[0]}x{tile[1]} (the path is estimated as usual, on {where})",
+            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than is available on {dev}: restoring the "
+            f"light field in overlapping tiles of {tile[0]}x{tile[1]} (the path is estimated as usual, on {where})",
             RuntimeWarning,
             stacklevel=2,
         )

@@ -5,7 +5,7 @@ from __future__ import annotations
 from ._params import BlindParams
 from ._region import region_grid
 
-__all__ = ["estimate_blind_memory", "plan_tiles", "tiles", "TILE_MARGIN", "MIN_TILE", "FINAL_TENSORS"]
+__all__ = ["estimate_blind_memory", "plan_tiles", "plan_run", "tiles", "TILE_MARGIN", "MIN_TILE", "FINAL_TENSORS"]
 
 #: overlap (px) of neighbouring tiles in the final stage, on top of what ``d_inf`` shifts
 TILE_MARGIN = 12
@@ -32,6 +32,11 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     -------
     int
     """
+    return _memory_of_stages(shape, params)[0]
+
+
+def _memory_of_stages(shape, params):
+    """``(whole run, path stage alone)``: the peak memory estimates of :func:`estimate_blind_memory`."""
     p = params or BlindParams()
     shape = tuple(int(s) for s in shape)
     V, U, Y, X = shape[:4]
@@ -51,15 +56,18 @@ def estimate_blind_memory(shape, params: BlindParams | None = None) -> int:
     path = n * C * 4 + n * 4 * 2 + V * U * ny * nx * 4 * (2 * rows * cols + 14)
     tables = 4 * max(p.n_times, p.final_n_times) * (X * U * U + Y * V * V) * 2
     blocks = 4 * (1 << 22) * 3
-    return int(max(final, path) + tables + blocks)
+    return int(max(final, path) + tables + blocks), int(path + tables + blocks)
 
 
-def plan_tiles(shape, params: BlindParams | None, free: int | None):
+def plan_tiles(shape, params: BlindParams | None, free: int | None, result_in_free: bool = True):
     """The tile size ``(ty, tx)`` to work in when the whole light field does not fit, else None.
 
     The largest square-ish tiles (plus :data:`TILE_MARGIN` on each side) whose
     :func:`estimate_blind_memory` fits in ``free`` bytes, after the full-size
-    result is set aside. None when ``free`` is unknown or enough.
+    result is set aside (when ``result_in_free``: on the CPU, where the result
+    lives; a GPU sends each tile's result to the host). None when ``free`` is
+    unknown or enough. The tiles are :data:`MIN_TILE` px when even those do
+    not fit.
 
     Parameters
     ----------
@@ -67,6 +75,7 @@ def plan_tiles(shape, params: BlindParams | None, free: int | None):
     params : BlindParams, optional
     free : int or None
         Bytes available.
+    result_in_free : bool, default True
 
     Returns
     -------
@@ -78,16 +87,55 @@ def plan_tiles(shape, params: BlindParams | None, free: int | None):
         return None
     V, U, Y, X = shape[:4]
     C = shape[4] if len(shape) == 5 else 1
-    budget = free - 4 * V * U * Y * X * C  # the result, full size
-
-    def need(side):
-        ty, tx = min(Y, side + 2 * TILE_MARGIN), min(X, side + 2 * TILE_MARGIN)
-        return estimate_blind_memory((V, U, ty, tx, C), p)
-
+    budget = free - (4 * V * U * Y * X * C if result_in_free else 0)  # the result, full size
     side = max(Y, X)
-    while side > MIN_TILE and need(side) > budget:
+    while side > MIN_TILE and _tile_memory(shape, p, (side, side)) > budget:
         side = max(MIN_TILE, int(side * 0.8))
     return min(Y, side), min(X, side)
+
+
+def _tile_memory(shape, p: BlindParams, tile) -> int:
+    """:func:`estimate_blind_memory` of one tile of ``tile`` px with its overlap."""
+    V, U, Y, X = shape[:4]
+    ty, tx = min(Y, tile[0] + 2 * TILE_MARGIN), min(X, tile[1] + 2 * TILE_MARGIN)
+    return estimate_blind_memory((V, U, ty, tx) + tuple(shape[4:]), p)
+
+
+def plan_run(shape, params: BlindParams | None, device, free_memory):
+    """Where a blind run goes: ``(device, tile)``, the device to run on and the tile plan (or None).
+
+    On the CPU, a light field that does not fit is restored in tiles
+    (:func:`plan_tiles`). On a GPU, too, when the path stage fits on it
+    whole (it works on windows of the full frame) and the final stage fits
+    in tiles (their results go to the host as they are done); otherwise the
+    run goes to the CPU.
+
+    Parameters
+    ----------
+    shape : tuple, (V, U, Y, X[, C])
+    params : BlindParams, optional
+    device : torch.device
+    free_memory : callable
+        ``free_memory(device)``: bytes free on a device, or None when
+        unknown (:func:`napari_lfdeblur.devices.free_memory`).
+
+    Returns
+    -------
+    device : torch.device
+    tile : tuple of 2 int, or None
+    """
+    import torch
+
+    p = params or BlindParams()
+    if device.type == "cuda":
+        free = free_memory(device)
+        tile = plan_tiles(shape, p, free, result_in_free=False)
+        if tile is None:
+            return device, None
+        if _memory_of_stages(shape, p)[1] <= free and _tile_memory(shape, p, tile) <= free:
+            return device, tile
+        device = torch.device("cpu")
+    return device, plan_tiles(shape, p, free_memory(device))
 
 
 def tiles(Y: int, X: int, tile, margin: int):
