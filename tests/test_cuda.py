@@ -85,3 +85,24 @@ def test_blind_deblurring_on_the_gpu_finds_the_blur_and_lowers_the_error():
     err_blurred = np.sqrt(np.mean((blurred - sharp)[:, :, c:-c, c:-c] ** 2))
     err_restored = np.sqrt(np.mean((res.lightfield - sharp)[:, :, c:-c, c:-c] ** 2))
     assert err_restored < 0.75 * err_blurred  # as on the CPU (test_blind.py)
+
+
+def test_a_gpu_short_of_memory_restores_in_tiles_on_the_gpu(monkeypatch):
+    # as test_blind.test_short_memory_runs_in_overlapping_tiles, with the GPU's plan
+    from napari_lfdeblur import devices
+    from napari_lfdeblur.blind import _memory
+
+    sharp = _scene((5, 5, 72, 72), seed=6)
+    cp = np.array([[-0.6, 0.2, -0.3], [0.5, -0.3, 0.3]])
+    blurred = simulate_blur(sharp, cp, n_times=32)
+    p = BlindParams().replace(n_control_points=2, path=dict(n_outer=2, steps=60, region=40),
+                              final={"n_iter": 20, "tol": 0.0}, final_n_times=8)
+    whole, path_stage = _memory._memory_of_stages(blurred.shape, p)
+    assert path_stage < whole
+    monkeypatch.setattr(devices, "free_memory", lambda device: (whole + path_stage) // 2)
+    with pytest.warns(RuntimeWarning, match="overlapping tiles"):
+        res = blind_deblur(blurred, params=p, device="cuda", seed=0)
+    assert res.info["device"].startswith("cuda") and res.info["tile"][0] < 72
+    # the tiles, with their overlap, give nearly what one full-frame solve with that path gives
+    ref = deconvolve(blurred, res.control_points, n_times=8, method="tv", n_iter=20, tol=0.0, device="cuda")
+    assert np.abs(res.lightfield - ref).max() < 2e-3
