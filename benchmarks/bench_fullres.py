@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/bench_fullres.py [--cases synthetic0,synthetic1,illum0,illumneg1] [--device auto|cpu|cuda]
-        [--noise 0.005] [--out PATH]
+        [--noise 0.005] [--max-memory X] [--out PATH]
 
 Cases (each blurred by the same known path with ``p_z != 0``, 64 instants, plus Gaussian noise):
 
@@ -74,8 +74,8 @@ def central(a, size=CROP):
     return a[:, :, y0 : y0 + h, x0 : x0 + w]
 
 
-def run_case(name: str, device: str, noise: float) -> dict:
-    """Everything of one case, in this process."""
+def run_case(name: str, device: str, noise: float, max_memory: float | None = None) -> dict:
+    """Everything of one case, in this process; ``max_memory`` (x the input's size) adds a capped whole run."""
     from napari_lfdeblur import deconvolve, simulate_blur
     from napari_lfdeblur.blind import blind_deblur
     from napari_lfdeblur.metrics import path_error, psnr
@@ -99,20 +99,24 @@ def run_case(name: str, device: str, noise: float) -> dict:
     row = {"case": name, "scene": scene, "d_inf": d_inf, "shape": list(sharp.shape),
            "blurred_psnr": psnr(blurred, sharp), "crop_blurred_psnr": psnr(central(blurred), ref_crop)}
     out = {}
-    for label, data in (("full", blurred), ("crop", central(blurred))):
+    runs = [("full", blurred, None), ("crop", central(blurred), None)]
+    if max_memory:
+        runs.append(("capped", blurred, max_memory * blurred.nbytes))
+    for label, data, cap in runs:
         with PeakMemory(device) as mem:
             t0 = time.perf_counter()
-            res = blind_deblur(data, infinity_disparity=d_inf, device=device, require_evidence=False)
+            res = blind_deblur(data, infinity_disparity=d_inf, device=device, require_evidence=False, max_memory=cap)
             seconds = time.perf_counter() - t0
-        truth = sharp if label == "full" else ref_crop
+        truth = ref_crop if label == "crop" else sharp
         found = bool(res.info["blur_found"])
         out[label] = {"seconds": seconds, "path_s": res.timings["path"], "final_s": res.timings["final"],
                       "memory_x": mem.delta_mib * 2**20 / data.nbytes, "blur_found": found,
                       "gain_anyway": psnr(res.lightfield, truth) - psnr(data, truth),
                       "gain_default": (psnr(res.lightfield, truth) - psnr(data, truth)) if found else 0.0,
                       "gain_on_crop": on_crop_gain(res.lightfield if label == "crop" else central(res.lightfield)),
-                      "mismatch": mismatch(res.control_points, label), "windows": res.info["windows"]}
-        if label == "full":  # the path found, judged on the whole frame too
+                      "mismatch": mismatch(res.control_points, label), "windows": res.info["windows"],
+                      "tile": res.info.get("tile")}
+        if label != "crop":  # the path found, judged on the whole frame too
             out[label]["mismatch_whole"] = path_error(res.control_points, PATH, lightfield=sharp,
                                                       infinity_disparity=d_inf).blur_mismatch
         print(f"{name} {label}: {out[label]}", file=sys.stderr, flush=True)
@@ -127,16 +131,21 @@ def run_case(name: str, device: str, noise: float) -> dict:
     return row
 
 
-def table(rows) -> list[str]:
+def table(rows, max_memory=None) -> list[str]:
     lines = ["| case | d_inf | pipeline | blur found | time s (path + final) | peak memory (x input) | "
              "gain dB, default | gain dB, restored anyway | on the crop, restored anyway | blur mismatch on the crop | "
              "on the whole frame |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        for label in ("full", "crop"):
+        for label in ("full", "crop", "capped"):
+            if label not in r:
+                continue
             o = r[label]
-            size = "x".join(str(s) for s in r["shape"]) if label == "full" else f"central {CROP}x{CROP} crop"
-            whole = f"{o['mismatch_whole']:.3f}" if label == "full" else "—"
+            size = "x".join(str(s) for s in r["shape"]) if label != "crop" else f"central {CROP}x{CROP} crop"
+            if label == "capped":
+                tiles = f"{o['tile'][0]}x{o['tile'][1]} tiles" if o["tile"] else "not tiled"
+                size += f", max_memory {max_memory:g}x input ({tiles})"
+            whole = f"{o['mismatch_whole']:.3f}" if label != "crop" else "—"
             lines.append(f"| {r['case']} | {r['d_inf']:+g} | blind, {size} | {'yes' if o['blur_found'] else 'no'} | "
                          f"{o['seconds']:.1f} ({o['path_s']:.1f} + {o['final_s']:.1f}) | {o['memory_x']:.1f} | "
                          f"{o['gain_default']:+.2f} | {o['gain_anyway']:+.2f} | {o['gain_on_crop']:+.2f} | "
@@ -153,6 +162,8 @@ def main(argv=None):
     parser.add_argument("--cases", default=",".join(CASES), help="comma-separated case names")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--noise", type=float, default=0.005)
+    parser.add_argument("--max-memory", type=float, default=None, metavar="X",
+                        help="also run the whole blind pipeline with max_memory = X times the input's size")
     parser.add_argument("--case-json", help=argparse.SUPPRESS)  # internal: run one case, print its JSON
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
@@ -160,15 +171,16 @@ def main(argv=None):
 
     device = str(select_device(args.device))
     if args.case_json:
-        print(json.dumps(run_case(args.case_json, device, args.noise)))
+        print(json.dumps(run_case(args.case_json, device, args.noise, args.max_memory)))
         return 0
     rows, skipped = [], []
     for name in args.cases.split(","):
         if CASES[name][0] == "Illum" and not eval_set.capture_available("Illum"):
             skipped.append(f"- `{name}`: the Illum capture is not available")
             continue
+        cap = ["--max-memory", str(args.max_memory)] if args.max_memory else []
         proc = subprocess.run([sys.executable, __file__, "--case-json", name, "--device", device,
-                               "--noise", str(args.noise)], capture_output=True, text=True, check=False)
+                               "--noise", str(args.noise), *cap], capture_output=True, text=True, check=False)
         if proc.returncode != 0:
             print(proc.stderr, file=sys.stderr)
             raise SystemExit(f"case {name} failed")
@@ -184,8 +196,11 @@ def main(argv=None):
         "the whole pipeline also on the whole sharp light field. *On the crop*: the gain of each pipeline on the "
         f"central crop alone, its {BORDER}-px border left out, so that the two compare like for like (the whole "
         "pipeline's own gain is over the whole frame, whose content differs from the crop's). Peak memory: above "
-        "the input, in units of its size.",
-        "", *table(rows)]
+        "the input, in units of its size."
+        + (f" *max_memory*: the whole pipeline again with `max_memory` set to {args.max_memory:g} times the "
+           "input's size (the final stage then runs in tiles where the estimate says the whole would not fit)."
+           if args.max_memory else ""),
+        "", *table(rows, args.max_memory)]
     if skipped:
         body += ["", "Skipped:", *skipped]
     _report.write_table(_report.table_path(args.out, __file__), "Whole light fields: blind and non-blind",

@@ -752,6 +752,23 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
     assert np.abs(res.lightfield - ref).max() < 2e-3
 
 
+def test_max_memory_bounds_the_run_by_tiles_and_is_checked(monkeypatch):
+    sharp = _scene((5, 5, 160, 160), seed=6)
+    blurred = simulate_blur(sharp, np.array([[-0.6, 0.2, 0.0], [0.5, -0.3, 0.0]]), n_times=16)
+    p = BlindParams().replace(n_control_points=2, require_evidence=False, path=dict(n_outer=1, steps=20, region=32),
+                              final={"n_iter": 5}, final_n_times=4)
+    full = blind.estimate_blind_memory(blurred.shape, p)
+    monkeypatch.setattr(devices, "free_memory", lambda device: 10 * full)  # plenty free: max_memory decides
+    with pytest.warns(RuntimeWarning, match="more than max_memory"):
+        res = blind_deblur(blurred, params=p, device="cpu", max_memory=full * 0.75)
+    tile = res.info["tile"]
+    assert _memory.MIN_TILE < tile[0] < 160 and tile == _memory.plan_tiles(blurred.shape, p, int(full * 0.75))
+    for bad, error in ((0, ValueError), (-1e9, ValueError), (float("nan"), ValueError), ("4G", TypeError),
+                       (True, TypeError)):
+        with pytest.raises(error, match="max_memory"):
+            blind_deblur(blurred, params=p, device="cpu", max_memory=bad)
+
+
 def test_out_of_memory_mid_run_falls_back_and_releases(monkeypatch):
     released = []
     devices_run = []

@@ -179,7 +179,7 @@ def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, 
     _, src = lf_file
     seen = {}
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
         seen["params"] = params
         yield Progress("path", 1, 1, loss=1.0)
         cp = preset_path("shake6", 1.0, 0)
@@ -207,7 +207,8 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     lf, src = lf_file
     rejected = linear_path(1.5, 30.0)
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):  # the evidence test says no
+    # the evidence test says no
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
         yield Progress("path", 1, 1, loss=1.0)
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params,
                                  info={"blur_found": False, "message": "little blur found", "rejected_path": rejected})
@@ -236,7 +237,7 @@ def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_pa
 
     _, src = lf_file
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
         yield Progress("path", 1, 4, loss=0.125)
         yield Progress("path", 2, 4)  # inside a path-fit step: NaN loss
         yield Progress("path", 3, 4)
@@ -255,6 +256,31 @@ def test_deblur_help_describes_motion(capsys):
     assert "--motion {3dof,6dof}" in text and "slower" in text and "rotation" in text
 
 
+def test_deblur_max_memory_reaches_the_solver_in_bytes_and_is_checked(lf_file, tmp_path, monkeypatch, capsys):
+    from napari_lfdeblur import blind
+    from napari_lfdeblur.progress import Progress
+
+    _, src = lf_file
+    seen = []
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
+        seen.append(max_memory)
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind.BlindResult(lf, np.zeros((3, 3)), params=params)
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
+    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu"]) == 0
+    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--overwrite",
+                 "--max-memory", "1.5"]) == 0
+    assert seen == [None, 3 * 2**29]
+    capsys.readouterr()
+    for bad in ("0", "-2", "lots", "inf"):
+        with pytest.raises(SystemExit):
+            main(["deblur", str(src), str(tmp_path / "x.npz"), "--max-memory", bad])
+        assert "expected a positive number of GiB" in capsys.readouterr().err
+    assert len(seen) == 2 and not (tmp_path / "x.npz").exists()
+
+
 def test_deblur_light_restoration_reaches_the_params_and_is_checked(lf_file, tmp_path, monkeypatch, capsys):
     from napari_lfdeblur import blind
     from napari_lfdeblur.progress import Progress
@@ -262,7 +288,7 @@ def test_deblur_light_restoration_reaches_the_params_and_is_checked(lf_file, tmp
     _, src = lf_file
     seen = []
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
         seen.append(params)
         yield Progress("path", 1, 1, loss=1.0)
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params)

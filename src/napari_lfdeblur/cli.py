@@ -9,6 +9,7 @@ exit status 2, never as a traceback.
 from __future__ import annotations
 
 import argparse
+import math
 import shlex
 import sys
 from pathlib import Path
@@ -51,6 +52,17 @@ def _fraction(text: str) -> float:
     if not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a number in [0, 1], such as 0.5")
     return value
+
+
+def _gib(text: str) -> int:
+    """A positive number of GiB, as bytes (``--max-memory``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number of GiB, such as 4 or 1.5")
+    return int(value * 2**30)
 
 
 def _input_argument(p, help_text="light field file or folder"):
@@ -198,6 +210,9 @@ def _add_deblur(sub):
                         "farthest content (sky, a far wall); the blind solver cannot estimate it (see "
                         "docs/blind.md)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--max-memory", type=_gib, default=None, metavar="GIB",
+                   help="memory the run may use on its device, in GiB (default: what it has free); with less "
+                        "than it needs, the light field is restored in tiles")
     p.add_argument("--motion", choices=["3dof", "6dof"], default=None,
                    help="camera motion to estimate (BlindParams.motion; default: the preset's or --params', "
                         "3dof). 3dof: translation only, an (n, 3) path. 6dof: a rotation stage follows, for "
@@ -263,7 +278,8 @@ def _run_deblur(args):
         params = params.replace(motion=args.motion)
     lf, meta = _read(args)
     d_inf = _stated_infinity_disparity(args.infinity_disparity, meta, args.input)
-    gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=args.device, seed=args.seed)
+    gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=args.device, seed=args.seed,
+                            max_memory=args.max_memory)
     bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
 
     def show(rec):

@@ -102,7 +102,7 @@ from ._alternating import iter_alternating, relay
 from ._disparity import gray, shear
 from ._evidence import blur_evidence, evidence_message
 from ._joint import iter_joint
-from ._memory import TILE_MARGIN, estimate_blind_memory, plan_run, tiles
+from ._memory import TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tiles, within
 from ._region import choose_regions
 from ._rotation import iter_rotation_fit
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams, RotationFitParams
@@ -138,6 +138,7 @@ def blind_deblur(
     device="auto",
     seed: int = 0,
     callback=None,
+    max_memory: float | None = None,
     **overrides,
 ) -> BlindResult:
     """Estimate the camera path and the sharp light field of a motion-blurred light field.
@@ -157,11 +158,18 @@ def blind_deblur(
         (:func:`check_infinity_disparity`). ``'auto'`` is refused: it cannot
         be estimated from the blurred light field (docs/blind.md).
     device : {'auto', 'cpu', 'cuda'}, default 'auto'
-        Falls back to the CPU, with a warning, when the GPU lacks the memory.
+        Where memory is short the final stage runs in tiles; a GPU that
+        cannot hold the path stage falls back to the CPU, with a warning
+        (docs/blind.md, *Memory*).
     seed : int, default 0
         Seed of the random parts (initial paths); equal seeds give equal results.
     callback : callable, optional
         Called with each :class:`~napari_lfdeblur.progress.Progress` record.
+    max_memory : float, optional
+        Bytes of memory the run may use on its device (the GPU's memory, or
+        the host's on the CPU), at most; the final stage runs in tiles to
+        stay within it (by :func:`estimate_blind_memory`). Default: what the
+        device has free.
     **overrides
         Fields of :class:`BlindParams` to change, as in
         :meth:`BlindParams.replace` (e.g. ``n_control_points=3``,
@@ -184,7 +192,7 @@ def blind_deblur(
         On an unknown keyword or parameter of the wrong type.
     """
     gen = iter_blind_deblur(blurred, params=params, infinity_disparity=infinity_disparity, device=device,
-                            seed=seed, **overrides)
+                            seed=seed, max_memory=max_memory, **overrides)
     return run_to_completion(gen, callback)
 
 
@@ -195,6 +203,7 @@ def iter_blind_deblur(
     infinity_disparity: float = 0.0,
     device="auto",
     seed: int = 0,
+    max_memory: float | None = None,
     **overrides,
 ):
     """Blind deblurring as a generator: yields progress, returns a :class:`BlindResult`.
@@ -235,17 +244,20 @@ def iter_blind_deblur(
     p = _make_params(params, overrides)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be an integer; got {seed!r}")
+    cap = check_max_memory(max_memory)
     asked = devices.select_device(device)
     need = estimate_blind_memory(arr.shape, p)
-    dev, tile = plan_run(arr.shape, p, asked, devices.free_memory)
+    available = within(devices.free_memory, cap)
+    dev, tile = plan_run(arr.shape, p, asked, available)
     if dev != asked:
         warnings.warn(f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {asked} has free, even "
                       "in tiles: running on the CPU instead", RuntimeWarning, stacklevel=2)
     if tile is not None:
         where = f"{p.path.region}x{p.path.region} windows" if p.path.region else "the whole view"
+        have = "max_memory" if cap is not None and available(dev) == cap else f"what {dev} has free"
         warnings.warn(
-            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than is available on {dev}: restoring the "
-            f"light field in overlapping tiles of {tile[0]}x{tile[1]} (the path is estimated as usual, on {where})",
+            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {have}: restoring the light field in "
+            f"overlapping tiles of {tile[0]}x{tile[1]} (the path is estimated as usual, on {where})",
             RuntimeWarning,
             stacklevel=2,
         )

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import math
+import numbers
+
 from ._params import BlindParams
 from ._region import region_grid
 
-__all__ = ["estimate_blind_memory", "plan_tiles", "plan_run", "tiles", "TILE_MARGIN", "MIN_TILE", "FINAL_TENSORS"]
+__all__ = ["estimate_blind_memory", "plan_tiles", "plan_run", "check_max_memory", "within", "tiles", "TILE_MARGIN",
+           "MIN_TILE", "FINAL_TENSORS"]
 
 #: overlap (px) of neighbouring tiles in the final stage, on top of what ``d_inf`` shifts
 TILE_MARGIN = 12
@@ -136,6 +140,29 @@ def plan_run(shape, params: BlindParams | None, device, free_memory):
             return device, tile
         device = torch.device("cpu")
     return device, plan_tiles(shape, p, free_memory(device))
+
+
+def check_max_memory(max_memory) -> int | None:
+    """``max_memory`` as whole bytes (None stays None); a positive finite number, else an error."""
+    if max_memory is None:
+        return None
+    if isinstance(max_memory, bool) or not isinstance(max_memory, numbers.Real):
+        raise TypeError(f"max_memory must be a number of bytes or None; got {max_memory!r}")
+    if not math.isfinite(max_memory) or max_memory <= 0:
+        raise ValueError(f"max_memory must be a positive number of bytes; got {max_memory!r}")
+    return int(max_memory)
+
+
+def within(free_memory, cap: int | None):
+    """``free_memory`` (a function of the device) limited to ``cap`` bytes; ``cap`` where it is unknown."""
+    if cap is None:
+        return free_memory
+
+    def available(device):
+        free = free_memory(device)
+        return cap if free is None else min(free, cap)
+
+    return available
 
 
 def tiles(Y: int, X: int, tile, margin: int):
