@@ -32,5 +32,5 @@ status=0
 "$py" benchmarks/bench_infinity_disparity.py --device cuda --n-times 32 --infinity-disparity 0 1 2 \
     --repeats 5 --out "$out/bench_infinity_disparity.md" || status=1
 "$py" benchmarks/bench_rotation.py --device cuda --n-times 32 --repeats 5 --out "$out/bench_rotation.md" || status=1
-"$py" benchmarks/bench_fullres.py --device cuda --out "$out/bench_fullres.md" || status=1
+"$py" benchmarks/bench_fullres.py --device cuda --max-memory 4 --out "$out/bench_fullres.md" || status=1
 exit $status

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 import numbers
 
+import torch
+
 from ._params import BlindParams
 from ._region import region_grid
 
@@ -128,8 +130,6 @@ def plan_run(shape, params: BlindParams | None, device, free_memory):
     device : torch.device
     tile : tuple of 2 int, or None
     """
-    import torch
-
     p = params or BlindParams()
     if device.type == "cuda":
         free = free_memory(device)
