@@ -256,7 +256,12 @@ def test_deblur_help_describes_motion(capsys):
     assert "--motion {3dof,6dof}" in text and "slower" in text and "rotation" in text
 
 
-def test_deblur_max_memory_reaches_the_solver_in_bytes_and_is_checked(lf_file, tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("option, value, received, bad, message", [
+    ("--light-restoration", "0.25", [0.0, 0.25], ("1.5", "-0.1", "half"), "expected a number in [0, 1]"),
+    ("--max-memory", "1.5", [None, 3 * 2**29], ("0", "-2", "lots", "inf"), "expected a positive number of GiB"),
+])
+def test_deblur_options_reach_the_solver_and_are_checked(option, value, received, bad, message, lf_file, tmp_path,
+                                                         monkeypatch, capsys):
     from napari_lfdeblur import blind
     from napari_lfdeblur.progress import Progress
 
@@ -264,43 +269,17 @@ def test_deblur_max_memory_reaches_the_solver_in_bytes_and_is_checked(lf_file, t
     seen = []
 
     def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
-        seen.append(max_memory)
+        seen.append(params.light_restoration if option == "--light-restoration" else max_memory)
         yield Progress("path", 1, 1, loss=1.0)
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params)
 
     monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
     assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu"]) == 0
-    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--overwrite",
-                 "--max-memory", "1.5"]) == 0
-    assert seen == [None, 3 * 2**29]
+    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--overwrite", option, value]) == 0
+    assert seen == received
     capsys.readouterr()
-    for bad in ("0", "-2", "lots", "inf"):
+    for text in bad:
         with pytest.raises(SystemExit):
-            main(["deblur", str(src), str(tmp_path / "x.npz"), "--max-memory", bad])
-        assert "expected a positive number of GiB" in capsys.readouterr().err
-    assert len(seen) == 2 and not (tmp_path / "x.npz").exists()
-
-
-def test_deblur_light_restoration_reaches_the_params_and_is_checked(lf_file, tmp_path, monkeypatch, capsys):
-    from napari_lfdeblur import blind
-    from napari_lfdeblur.progress import Progress
-
-    _, src = lf_file
-    seen = []
-
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
-        seen.append(params)
-        yield Progress("path", 1, 1, loss=1.0)
-        return blind.BlindResult(lf, np.zeros((3, 3)), params=params)
-
-    monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
-    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu"]) == 0
-    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--overwrite",
-                 "--light-restoration", "0.25"]) == 0
-    assert [p.light_restoration for p in seen] == [0.0, 0.25]
-    capsys.readouterr()
-    for bad in ("1.5", "-0.1", "half"):
-        with pytest.raises(SystemExit):
-            main(["deblur", str(src), str(tmp_path / "x.npz"), "--light-restoration", bad])
-        assert "expected a number in [0, 1]" in capsys.readouterr().err
+            main(["deblur", str(src), str(tmp_path / "x.npz"), option, text])
+        assert message in capsys.readouterr().err
     assert len(seen) == 2 and not (tmp_path / "x.npz").exists()
