@@ -1,7 +1,6 @@
 """Tests of blind deblurring (napari_lfdeblur.blind) at tiny sizes."""
 
 import json
-import warnings
 import weakref
 
 import numpy as np

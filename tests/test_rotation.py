@@ -82,6 +82,7 @@ def test_tiled_kernel_gradient_matches_finite_differences(views):
     s_u = (torch.rand(T, X, generator=g, dtype=torch.float64) * 6 - 3).requires_grad_(True)
     t_y = (torch.rand(T, Y, X, generator=g, dtype=torch.float64) * 5 - 2.5).requires_grad_(True)
     t_x = (torch.rand(T, Y, X, generator=g, dtype=torch.float64) * 5 - 2.5).requires_grad_(True)
+
     def kernel(*shifts):
         K, layout = tiled_kernel(*shifts, (V, U, Y, X, 1), side=4)
         assert len(layout) == 9  # 3 x 3 tiles
