@@ -159,7 +159,7 @@ def test_evidence_message_names_every_unmet_condition(gain_ok, relative_ok, reac
 
 
 @pytest.mark.parametrize("extent", [0.0, 0.15])
-def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent):
+def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent, monkeypatch):
     sharp = _scene()
     rng = np.random.default_rng(1)
     blurred = simulate_blur(sharp, linear_path(extent, 30.0), n_times=32) if extent else sharp
@@ -174,18 +174,69 @@ def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent):
         forced = blind_deblur(blurred, params=BlindParams().replace(n_control_points=2, require_evidence=False, **FAST),
                               device="cpu")
         assert "restored anyway" in forced.info["message"] and forced.info["restoration"] == "full"
+        assert np.isnan(forced.info["evidence"]["disagreement"])  # no agreement check when it cannot matter
         np.testing.assert_array_equal(forced.control_points, res.info["rejected_path"])
-        # a light restoration: the final stage with the rejected path at half its length
+        # a light restoration (the halves made to agree, and its blur counted as one whatever its size): the final
+        # stage with the rejected path at half its length
+        monkeypatch.setattr(_evidence, "AGREEMENT_MARGIN", float("inf"))
+        monkeypatch.setattr(_evidence, "MIN_REACH", 0.0)
         params = BlindParams().replace(n_control_points=2, light_restoration=0.5, **FAST)
         light = blind_deblur(blurred, params=params, device="cpu")
         assert light.info["blur_found"] is False and light.info["restoration"] == "light"
         assert "a light restoration, with the estimated path at 50 % of its length" in light.info["message"]
+        assert "agree on the path" in light.info["message"] and len(light.info["evidence"]["agreement_paths"]) == 2
         np.testing.assert_array_equal(light.info["rejected_path"], res.info["rejected_path"])
         np.testing.assert_allclose(light.control_points, 0.5 * res.info["rejected_path"], atol=1e-12)
         want = deconvolve(blurred, light.control_points, n_times=params.final_n_times, params=params.final,
                           device="cpu")
         np.testing.assert_allclose(light.lightfield, want, atol=1e-6)
         assert not np.array_equal(light.lightfield, blurred)
+        # halves that disagree: the input, and the message says why
+        monkeypatch.setattr(_evidence, "AGREEMENT_MARGIN", -1.0)
+        none = blind_deblur(blurred, params=params, device="cpu")
+        assert none.info["restoration"] == "none" and "disagree on the path" in none.info["message"]
+        np.testing.assert_array_equal(none.lightfield, blurred)
+
+
+def test_split_parts_cut_the_data_in_two_and_place_the_parts():
+    g = torch.rand(3, 3, 20, 36, 1)
+    (a, fa), (b, fb) = _evidence.split_parts([g], [(4, 6, 20, 36)], (50, 60))  # wider: cut across x
+    assert fa == [(4, 6, 50, 60)] and fb == [(4, 24, 50, 60)]
+    torch.testing.assert_close(torch.cat([a[0], b[0]], dim=3), g, rtol=0, atol=0)
+    tall = torch.rand(3, 3, 40, 20, 1)
+    (a, fa), (b, fb) = _evidence.split_parts([tall], [(0, 0, 40, 20)], (40, 20))
+    assert fa == [(0, 0, 40, 20)] and fb == [(20, 0, 40, 20)]
+    torch.testing.assert_close(torch.cat([a[0], b[0]], dim=2), tall, rtol=0, atol=0)
+    # several windows: dealt out alternately, each keeping its place
+    ws = [torch.full((1, 1, 4, 4, 1), float(i)) for i in range(3)]
+    (a, fa), (b, fb) = _evidence.split_parts(ws, [(0, 0, 4, 4), (0, 8, 4, 4), (8, 0, 4, 4)], (12, 12))
+    assert [float(t[0, 0, 0, 0, 0]) for t in a] == [0.0, 2.0] and fa == [(0, 0, 12, 12), (8, 0, 12, 12)]
+    assert [float(t[0, 0, 0, 0, 0]) for t in b] == [1.0] and fb == [(0, 8, 12, 12)]
+    assert _evidence.split_parts([torch.rand(3, 3, 20, 30, 1)], [(0, 0, 20, 30)], (20, 30)) is None  # halves < 16 px
+
+
+def test_path_disagreement_is_zero_for_one_path_symmetric_and_one_against_no_blur():
+    g = torch.as_tensor(_scene()[..., None])
+    a, b = linear_path(2.0, angle_deg=30.0), linear_path(1.0, angle_deg=100.0)
+    n = 16
+    assert _evidence.path_disagreement(g, a, a, n) == 0.0
+    assert _evidence.path_disagreement(g, a, b, n) == pytest.approx(_evidence.path_disagreement(g, b, a, n), rel=1e-6)
+    assert 0.3 < _evidence.path_disagreement(g, a, b, n) < 2.0
+    zero = np.zeros_like(a)
+    assert _evidence.path_disagreement(g, a, zero, n) == pytest.approx(1.0, rel=1e-6)  # as far as no blur
+    assert _evidence.path_disagreement(g, zero, zero, n) == float("inf")
+
+
+def test_two_halves_estimated_apart_agree_on_a_clear_blur(linear_case):
+    _, cp, blurred = linear_case
+    g = torch.as_tensor(blurred[..., None])
+    Y, X = g.shape[2:4]
+    p = BlindParams().replace(n_control_points=2, **FAST)
+    d, paths = run_to_completion(_evidence.iter_disagreement([g], [(0, 0, Y, X)], (Y, X), p, torch.device("cpu"),
+                                                             np.random.default_rng(0), p.path_box(7, 7)))
+    assert d <= _evidence.AGREEMENT_MARGIN and len(paths) == 2
+    for path in paths:  # each half finds the camera's path
+        assert chamfer_distance(_positions(path), _positions(cp)) < 0.5
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), "half"])

@@ -88,7 +88,13 @@ def test_demo_quick_blind_says_what_it_found(tmp_path, capsys):
         blurred, restored = (read_lightfield(out / f"{name}_{kind}.npz") for kind in ("blurred", "blind"))
         if rec["blind_blur_found"]:
             assert "blind_rejected_path" not in rec and not np.array_equal(restored, blurred)
+            assert rec["blind_restoration"] == "full"
+        elif rec["blind_restoration"] == "light":  # restored with the rejected path scaled, which the summary keeps
+            assert not np.array_equal(restored, blurred)
+            np.testing.assert_allclose(rec["blind_control_points"], 0.5 * np.asarray(rec["blind_rejected_path"]),
+                                       atol=1e-12)
         else:  # the input comes back unchanged, and the summary keeps the path that was rejected
+            assert rec["blind_restoration"] == "none"
             np.testing.assert_array_equal(restored, blurred)
             assert np.asarray(rec["blind_rejected_path"]).shape[1] == 3 and not np.any(rec["blind_control_points"])
 
@@ -257,7 +263,7 @@ def test_deblur_help_describes_motion(capsys):
 
 
 @pytest.mark.parametrize("option, value, received, bad, message", [
-    ("--light-restoration", "0.25", [0.0, 0.25], ("1.5", "-0.1", "half"), "expected a number in [0, 1]"),
+    ("--light-restoration", "0.25", [0.5, 0.25], ("1.5", "-0.1", "half"), "expected a number in [0, 1]"),
     ("--max-memory", "1.5", [None, 3 * 2**29], ("0", "-2", "lots", "inf"), "expected a positive number of GiB"),
 ])
 def test_deblur_options_reach_the_solver_and_are_checked(option, value, received, bad, message, lf_file, tmp_path,

@@ -723,17 +723,19 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     w.run_and_wait(timeout=60)
     assert [p.require_evidence for p in seen] == [True, False]
     assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["require_evidence"] is False
-    assert w.form.light_restoration.value == 0.0  # the presets return the input on little blur
+    assert w.form.light_restoration.value == 0.5  # the default preset's light restoration
     assert not w.form.light_restoration.enabled  # moot while restoring anyway
     w.form.restore_anyway.value = False
     assert w.form.light_restoration.enabled
-    w.form.light_restoration.value = 0.5
+    w.form.light_restoration.value = 0.25
     w.run_and_wait(timeout=60)
-    assert [p.light_restoration for p in seen] == [0.0, 0.0, 0.5] and seen[-1].require_evidence is True
-    assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["light_restoration"] == 0.5
+    assert [p.light_restoration for p in seen] == [0.5, 0.5, 0.25] and seen[-1].require_evidence is True
+    assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["light_restoration"] == 0.25
     w.form.restore_anyway.value = True
     w.form.preset.value = "paper"  # choosing a preset shows its own setting again
     assert w.form.restore_anyway.value is False and w.form.light_restoration.value == 0.0
+    w.form.preset.value = "default"
+    assert w.form.light_restoration.value == 0.5
     assert not [n for n in notifications if n[0] == "error"], notifications
 
 

@@ -11,7 +11,7 @@ import shlex
 import sys
 from pathlib import Path
 
-__all__ = ["add_batch", "run_batch"]
+__all__ = ["add_batch", "run_batch", "weak_blur_summary"]
 
 
 def _common(p) -> None:
@@ -153,15 +153,22 @@ def _run(args) -> int:
                          command=command, **options)
         finally:
             bar.close()
-    done = f"{report.n_ok} done, {report.n_skipped} already done (skipped)"
-    weak = [r.get("restoration", "none") for r in report.records if r["status"] == "ok" and r.get("blur_found") is False]
-    if weak.count("none"):
-        done += f"; {weak.count('none')} with little blur found, returned unchanged (blur_found in the manifest)"
-    if weak.count("light"):
-        done += f"; {weak.count('light')} with little blur found, restored lightly (restoration in the manifest)"
+    done = f"{report.n_ok} done, {report.n_skipped} already done (skipped)" + weak_blur_summary(report.records)
     if report.n_failed:
         print(f"lfdeblur batch {args.batch_command}: {report.n_failed} of {total} items failed ({done}); "
               f"see {Path(args.out_dir) / 'manifest.jsonl'}; rerun the same command to redo them", file=sys.stderr)
         return 1
     print(f"all {total} items in {args.out_dir} ({done})")
     return 0
+
+
+def weak_blur_summary(records) -> str:
+    """What the run's summary line adds about inputs with little blur found: how many were returned
+    unchanged and how many restored lightly (empty when none)."""
+    weak = [r.get("restoration", "none") for r in records if r["status"] == "ok" and r.get("blur_found") is False]
+    done = ""
+    if weak.count("none"):
+        done += f"; {weak.count('none')} with little blur found, returned unchanged (blur_found in the manifest)"
+    if weak.count("light"):
+        done += f"; {weak.count('light')} with little blur found, restored lightly (restoration in the manifest)"
+    return done

@@ -225,9 +225,10 @@ def _add_deblur(sub):
                    help="restore with the estimated path even when the data give little evidence of blur "
                         "(BlindParams.require_evidence=False; default: return the input unchanged then)")
     p.add_argument("--light-restoration", type=_fraction, metavar="FRACTION",
-                   help="when the data give little evidence of blur, restore with the estimated path scaled by "
-                        "FRACTION (in [0, 1]) instead of returning the input: a light restoration "
-                        "(BlindParams.light_restoration; default: the preset's, 0)")
+                   help="when the data give little evidence of blur but two halves of them agree on the path, "
+                        "restore with the estimated path scaled by FRACTION (in [0, 1]) instead of returning "
+                        "the input: a light restoration (BlindParams.light_restoration; default: the preset's, "
+                        "0.5 for 'default', 0 for 'paper'; 0: return the input)")
     p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT); "
                                       "a path that the evidence test rejects goes beside it, as *_rejected.json")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")

@@ -150,13 +150,15 @@ def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> l
         rec["blind_path_error"] = path_error(est_cp, DEMO_PATH, lightfield=sharp).as_dict()
         rec["blind_blur_found"] = bool(res.info["blur_found"])
         rec["blind_message"] = res.info["message"]
+        rec["blind_restoration"] = res.info["restoration"]
         paths["blind estimate"] = est_cp
-        if "rejected_path" in res.info:  # the evidence test returned the input: show what it rejected
+        if "rejected_path" in res.info:  # little blur found: show the path estimated
             rejected = res.info["rejected_path"]
             rec["blind_rejected_path"] = np.asarray(rejected).tolist()
             rec["blind_rejected_path_error"] = path_error(rejected, DEMO_PATH, lightfield=sharp).as_dict()
             paths["rejected estimate"] = rejected
-            notes["blind"] = "(little blur found: the input)"
+            light = res.info["restoration"] == "light"
+            notes["blind"] = "(little blur found: a light restoration)" if light else "(little blur found: the input)"
     rec["psnr_db"] = {k: round(psnr(v, sharp, crop=CROP), 2) for k, v in results.items()}
     rec["ssim"] = {k: round(ssim(v, sharp, crop=CROP), 4) for k, v in results.items()}
     title = f"{name}: " + ", ".join(f"{k} {v:.1f} dB" for k, v in rec["psnr_db"].items())

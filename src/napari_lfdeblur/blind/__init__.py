@@ -100,7 +100,7 @@ from ..path import bezier_positions, canonical_time_direction, center_path, path
 from ..progress import Progress, run_to_completion
 from ._alternating import iter_alternating, relay
 from ._disparity import gray, shear
-from ._evidence import blur_evidence, evidence_message
+from ._evidence import evidence_message, iter_verdict
 from ._joint import iter_joint
 from ._memory import TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tiles, within
 from ._region import choose_regions
@@ -402,9 +402,12 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     info = {"device": str(dev), "box": box, "window": window, "windows": windows, **est.info}
     info["levels"] = [(g.shape[2] // k, g.shape[3] // k) for k in est.factors]
     frame = (window[0], window[1], Y, X) if p.motion == "6dof" or frames else None
-    evidence = yield from _iter_evidence(g if sheared else shear(g, d_inf) if d_inf else g, est, p, dev, frame)
+    if sheared or not d_inf:  # the windows of the agreement check, in the d_inf = 0 model
+        split = (gs, windows, (Y, X), rng, box)
+    else:
+        split = ([shear(t, d_inf) for t in gs], windows, (Y, X), rng, box)
+    evidence, light = yield from iter_verdict(split[0][0], est, p, dev, frame, split)
     restore = evidence["blur_found"] or not p.require_evidence
-    light = 0.0 if restore else p.light_restoration
     info.update(blur_found=evidence["blur_found"], evidence=evidence,
                 message=evidence_message(evidence, p.require_evidence, light),
                 restoration="full" if restore else "light" if light else "none")
@@ -424,22 +427,6 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     t2 = time.perf_counter()
     return BlindResult(lightfield=np.asarray(out, dtype=np.float32), control_points=cp, loss_history=est.loss_history,
                        params=p, timings={"path": t1 - t0, "final": t2 - t1, "total": t2 - t0}, info=info)
-
-
-def _iter_evidence(g, est, p: BlindParams, dev, frame=None):
-    """Is the estimated blur significant? :func:`~napari_lfdeblur.blind._evidence.blur_evidence`, with progress.
-
-    ``g`` is the grayscale light field of the path stage in the ``d_inf = 0``
-    model (refocused by ``d_inf``), ``est`` the path stage's
-    :class:`~napari_lfdeblur.blind._params.PathEstimate`.
-    """
-    cp = center_path(est.control_points, p.n_times)
-
-    def report(_):  # placed at the start of the final stage: the fraction done stays monotone
-        return Progress(stage="evidence", iteration=0, n_iterations=1, loss=float("nan"),
-                        control_points=cp, stage_index=est.n_stages, n_stages=est.n_stages + 1)
-
-    return (yield from relay(blur_evidence(g, cp, p, dev, frame), report))
 
 
 def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):

@@ -8,6 +8,11 @@ the data better than the identity (misfit plus edge count) by more than noise
 alone would allow and by a clear fraction, and when the blur it describes
 moves the image by a good part of a pixel (docs/blind.md, "What makes it
 robust").
+
+Where that evidence is weak, a light restoration (``BlindParams.light_restoration``)
+still needs the blur to be the camera's: one motion for the whole view. The
+path is then estimated again, independently, on two disjoint parts of the
+data, and the two estimates must agree (:func:`iter_disagreement`).
 """
 
 from __future__ import annotations
@@ -19,14 +24,17 @@ import torch
 
 from .._noise import estimate_noise_sigma
 from ..blur import BlurOperator, image_shifts
-from ..path import bezier_positions
+from ..path import bezier_positions, center_path
 from ..priors import gradient_yx
-from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
+from ..progress import Progress
+from ._alternating import iter_alternating, relay
+from ._disparity import DISPARITY_PIXELS, disparity_map, downsample, shear
 from ._latent import difference_pair, l0_latent
 from ._params import BlindParams
 
 __all__ = ["noise_sigma", "blur_reach", "evidence_weight", "blur_evidence", "evidence_message", "Identity",
-           "EVIDENCE_MARGIN", "RELATIVE_MARGIN", "MIN_REACH"]
+           "EVIDENCE_MARGIN", "RELATIVE_MARGIN", "MIN_REACH", "AGREEMENT_MARGIN", "MIN_PART", "split_parts",
+           "path_disagreement", "iter_disagreement", "iter_verdict"]
 
 #: the blur model must lower the salient-edge objective by more than this many noise variances per sample
 EVIDENCE_MARGIN = 1.0
@@ -34,6 +42,10 @@ EVIDENCE_MARGIN = 1.0
 RELATIVE_MARGIN = 0.06
 #: a blur whose largest image motion is below this (px) counts as no blur
 MIN_REACH = 0.25
+#: two estimates of one camera motion agree when their blurs differ by at most this fraction of the larger one
+AGREEMENT_MARGIN = 0.5
+#: the smallest side (px) of a part of the view that the agreement check estimates a path on
+MIN_PART = 16
 
 
 class Identity:
@@ -111,6 +123,11 @@ def evidence_message(evidence: dict, required: bool = True, light: float = 0.0) 
                    f"(needs > {100 * RELATIVE_MARGIN:g} %)")
     if not e["reach"] >= MIN_REACH:
         why.append(f"it moves the image by {e['reach']:.2f} px at most (needs >= {MIN_REACH:g})")
+    d = e.get("disagreement", float("nan"))
+    if required and not math.isnan(d):
+        verb = "agree" if d <= AGREEMENT_MARGIN else "disagree"
+        why.append(f"two halves of the data, estimated apart, {verb} on the path (they differ by {d:.2f} of its "
+                   f"blur; agreement needs <= {AGREEMENT_MARGIN:g})")
     if not required:
         verdict = "restored anyway (require_evidence=False)"
     elif light:
@@ -167,3 +184,102 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device, frame=None):
     return {"sigma": sigma, "misfit_blur": m_blur, "misfit_none": m_none, "edges_blur": e_blur,
             "edges_none": e_none, "gain": gain, "relative": relative, "reach": reach,
             "blur_found": found}
+
+
+def split_parts(gs, windows, frame_shape):
+    """Two disjoint parts of the path stage's data, each ``(list of windows, list of frames)``.
+
+    ``gs`` are the path stage's windows (``(V, U, h, w, 1)`` each), ``windows``
+    their ``(y0, x0, h, w)`` in the view of ``frame_shape`` ``(Y, X)``. Several
+    windows are dealt out alternately (the first, third, ... and the second,
+    fourth, ...); one window is cut in two halves across its longer side.
+    Frames are ``(y0, x0, Y, X)``, as :func:`~napari_lfdeblur.blind._alternating.iter_alternating`
+    takes them. Returns None when a half would be narrower than :data:`MIN_PART` px.
+    """
+    Y, X = frame_shape
+    if len(gs) >= 2:
+        return [([gs[i] for i in idx], [(windows[i][0], windows[i][1], Y, X) for i in idx])
+                for idx in (range(0, len(gs), 2), range(1, len(gs), 2))]
+    g, (y0, x0, h, w) = gs[0], windows[0]
+    axis, n = (3, w) if w >= h else (2, h)
+    k = n // 2
+    if k < MIN_PART or min(h, w) < MIN_PART:
+        return None
+    low, high = g.narrow(axis, 0, k).contiguous(), g.narrow(axis, k, n - k).contiguous()
+    second = (y0, x0 + k) if axis == 3 else (y0 + k, x0)
+    return [([low], [(y0, x0, Y, X)]), ([high], [(*second, Y, X)])]
+
+
+def path_disagreement(g: torch.Tensor, cp_a, cp_b, n_times: int, frame=None) -> float:
+    """How much the blurs of two paths differ on ``g`` (V, U, h, w, 1), ``d_inf = 0`` model.
+
+    ``||K_a g - K_b g|| / max(||K_a g - g||, ||K_b g - g||)``: 0 when they blur
+    alike, about 1 when they differ as much as the larger blur from no blur
+    (symmetric in the two paths; inf when neither blurs ``g``). ``frame``
+    places ``g`` in the view, as in :class:`~napari_lfdeblur.blur.BlurOperator`.
+    """
+    with torch.no_grad():
+        a, b = (BlurOperator(tuple(g.shape), cp, n_times=n_times, infinity_disparity=0.0, device=g.device,
+                             frame=frame).forward(g) for cp in (cp_a, cp_b))
+        den = max(float(torch.linalg.vector_norm(a - g)), float(torch.linalg.vector_norm(b - g)))
+        return float(torch.linalg.vector_norm(a - b)) / den if den > 0 else float("inf")
+
+
+def iter_disagreement(gs, windows, frame_shape, p: BlindParams, device, rng, box: float):
+    """Estimate the path on two disjoint parts of the data, independently; how much the two differ.
+
+    The parts are :func:`split_parts`'; each gets the whole alternating
+    estimate (:func:`~napari_lfdeblur.blind._alternating.iter_alternating`,
+    in the view's coordinates, so that the two compare), and
+    :func:`path_disagreement` compares them on the first window. A camera
+    motion blurs every part of the view by one path, so two parts find the
+    same one; what a path fit makes of the scene's own edges or texture
+    differs from part to part.
+
+    A generator (yields the estimates' progress records); returns
+    ``(disagreement, [path_a, path_b])``, or ``(nan, [])`` when the data are
+    too small to split.
+    """
+    parts = split_parts(gs, windows, frame_shape)
+    if parts is None:
+        return float("nan"), []
+    cps = []
+    for part, frames in parts:
+        est = yield from iter_alternating(part, p, device, rng, box, None, frames)
+        cps.append(center_path(est.control_points, p.n_times))
+    frame = (windows[0][0], windows[0][1], *frame_shape)
+    return path_disagreement(gs[0], cps[0], cps[1], p.n_times, frame), cps
+
+
+def iter_verdict(g, est, p: BlindParams, device, frame=None, split=None):
+    """The evidence stage: is the estimated blur significant, and if not, is a light restoration warranted?
+
+    ``g`` is the grayscale light field of the evidence test in the ``d_inf =
+    0`` model (refocused by ``d_inf``), ``est`` the path stage's
+    :class:`~napari_lfdeblur.blind._params.PathEstimate`, ``frame`` places
+    ``g`` in the view. ``split``: ``(gs, windows, frame_shape, rng, box)``,
+    the path stage's windows (refocused likewise) for :func:`iter_disagreement`,
+    which runs when the test finds little blur, ``p.require_evidence`` holds
+    and the light restoration's path would move the image by at least
+    :data:`MIN_REACH` px. The light restoration is made when the two parts
+    agree within :data:`AGREEMENT_MARGIN`.
+
+    A generator of :class:`~napari_lfdeblur.progress.Progress` records (stage
+    ``'evidence'``); returns ``(evidence, light)``: :func:`blur_evidence`'s
+    dict, with ``disagreement`` (nan when not checked) and ``agreement_paths``
+    added, and the scale of the light restoration's path (0: none).
+    """
+    cp = center_path(est.control_points, p.n_times)
+
+    def report(_):  # placed at the start of the final stage: the fraction done stays monotone
+        return Progress(stage="evidence", iteration=0, n_iterations=1, loss=float("nan"),
+                        control_points=cp, stage_index=est.n_stages, n_stages=est.n_stages + 1)
+
+    evidence = yield from relay(blur_evidence(g, cp, p, device, frame), report)
+    evidence.update(disagreement=float("nan"), agreement_paths=[])
+    light = p.light_restoration
+    if evidence["blur_found"] or not p.require_evidence or light * evidence["reach"] < MIN_REACH or split is None:
+        return evidence, 0.0
+    disagreement, paths = yield from relay(iter_disagreement(*split[:3], p, device, *split[3:]), report)
+    evidence.update(disagreement=disagreement, agreement_paths=[c.tolist() for c in paths])
+    return evidence, light if disagreement <= AGREEMENT_MARGIN else 0.0

@@ -8,7 +8,8 @@ rotation: an ``(n, 6)`` path, plotted in a second panel),
 ``n_control_points``, ``n_iter`` (path iterations),
 ``tv_iter`` (final TV iterations), ``restore_anyway`` (restore even when
 the evidence test finds little blur), ``light_restoration`` (the scale of
-the path of a light restoration then; 0: the input), ``device``, ``seed``,
+the path of a light restoration then, made when two halves of the data
+agree on the path; 0: the input), ``device``, ``seed``,
 ``infinity_disparity``, ``edge_anisotropy``, ``preview_every`` and an
 optional ``true_path`` layer. While it runs:
 
@@ -29,8 +30,8 @@ When it finishes, the previews are replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
 timings, package version, and the verdict of the evidence test in
 ``blur_evidence``) and ``'<source> estimated path'``. When the data show
-little blur, the result is the input with a zero path (unless *restore
-anyway* is ticked), and a notification says why
+little blur, the result is a light restoration or the input with a zero
+path (unless *restore anyway* is ticked), and a notification says why
 (:attr:`napari_lfdeblur.blind.BlindResult.info`).
 """
 
@@ -71,9 +72,9 @@ def _iteration_field(params) -> tuple[str, str]:
 
 
 def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: int, edge_anisotropy: float,
-                 motion: str = "3dof", restore_anyway: bool = False, light_restoration: float = 0.0):
+                 motion: str = "3dof", restore_anyway: bool = False, light_restoration: float | None = None):
     """``BlindParams`` of a preset with the form's values (``tv_iter`` 0: no final solve;
-    ``restore_anyway``: ``require_evidence=False``; ``light_restoration``: its field).
+    ``restore_anyway``: ``require_evidence=False``; ``light_restoration``: its field, None: the preset's).
 
     Raises
     ------
@@ -91,7 +92,8 @@ def _make_params(preset: str, *, n_control_points: int, n_iter: int, tv_iter: in
     return params.replace(
         n_control_points=n_control_points, final=None if tv_iter == 0 else {"n_iter": tv_iter},
         latent={"edge_anisotropy": edge_anisotropy}, motion=motion, require_evidence=not restore_anyway,
-        light_restoration=light_restoration, **{stage: {field: n_iter}},
+        light_restoration=params.light_restoration if light_restoration is None else light_restoration,
+        **{stage: {field: n_iter}},
     )
 
 
@@ -127,9 +129,10 @@ def _fields(viewer) -> list:
         CheckBox(name="restore_anyway", value=False, label="restore anyway",
                  tooltip="restore with the estimated path even when the data give little evidence of blur "
                  "(BlindParams.require_evidence=False; default: return the input unchanged then)"),
-        fspin("light_restoration", 0.0, 0.0, 1.0, 0.05, label="light restoration",
-              tooltip="when the data give little evidence of blur, restore with the estimated path scaled by "
-              "this factor instead of returning the input (BlindParams.light_restoration; 0: the input)"),
+        fspin("light_restoration", PRESETS["default"].light_restoration, 0.0, 1.0, 0.05, label="light restoration",
+              tooltip="when the data give little evidence of blur but two halves of them, estimated apart, agree "
+              "on the path, restore with the estimated path scaled by this factor instead of returning the "
+              "input (BlindParams.light_restoration; 0: the input)"),
         device_choice(),
         spin("seed", 0, 0, 2**31 - 1, tooltip="random seed of the initial path"),
         fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
