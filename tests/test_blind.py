@@ -232,9 +232,12 @@ def test_two_halves_estimated_apart_agree_on_a_clear_blur(linear_case):
     g = torch.as_tensor(blurred[..., None])
     Y, X = g.shape[2:4]
     p = BlindParams().replace(n_control_points=2, **FAST)
+    parts = []
     d, paths = run_to_completion(_evidence.iter_disagreement([g], [(0, 0, Y, X)], (Y, X), p, torch.device("cpu"),
-                                                             np.random.default_rng(0), p.path_box(7, 7)))
+                                                             np.random.default_rng(0), p.path_box(7, 7)),
+                                 lambda item: parts.append(item[0]))
     assert d <= _evidence.AGREEMENT_MARGIN and len(paths) == 2
+    assert parts[0] == 0 and parts[-1] == 1 and parts == sorted(parts)  # records say which part they come from
     for path in paths:  # each half finds the camera's path
         assert chamfer_distance(_positions(path), _positions(cp)) < 0.5
 

@@ -225,7 +225,7 @@ def _add_deblur(sub):
                    help="restore with the estimated path even when the data give little evidence of blur "
                         "(BlindParams.require_evidence=False; default: return the input unchanged then)")
     p.add_argument("--light-restoration", type=_fraction, metavar="FRACTION",
-                   help="when the data give little evidence of blur but two halves of them agree on the path, "
+                   help="when the data give little evidence of blur but two parts of them agree on the path, "
                         "restore with the estimated path scaled by FRACTION (in [0, 1]) instead of returning "
                         "the input: a light restoration (BlindParams.light_restoration; default: the preset's, "
                         "0.5 for 'default', 0 for 'paper'; 0: return the input)")

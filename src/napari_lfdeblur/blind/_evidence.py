@@ -28,7 +28,7 @@ from ..path import bezier_positions, center_path
 from ..priors import gradient_yx
 from ..progress import Progress
 from ._alternating import iter_alternating, relay
-from ._disparity import DISPARITY_PIXELS, disparity_map, downsample, shear
+from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
 from ._latent import difference_pair, l0_latent
 from ._params import BlindParams
 
@@ -126,8 +126,8 @@ def evidence_message(evidence: dict, required: bool = True, light: float = 0.0) 
     d = e.get("disagreement", float("nan"))
     if required and not math.isnan(d):
         verb = "agree" if d <= AGREEMENT_MARGIN else "disagree"
-        why.append(f"two halves of the data, estimated apart, {verb} on the path (they differ by {d:.2f} of its "
-                   f"blur; agreement needs <= {AGREEMENT_MARGIN:g})")
+        why.append(f"two parts of the data, estimated apart, {verb} on the path (their blurs differ by {d:.2f} of "
+                   f"the larger; agreement needs <= {AGREEMENT_MARGIN:g})")
     if not required:
         verdict = "restored anyway (require_evidence=False)"
     elif light:
@@ -236,16 +236,16 @@ def iter_disagreement(gs, windows, frame_shape, p: BlindParams, device, rng, box
     same one; what a path fit makes of the scene's own edges or texture
     differs from part to part.
 
-    A generator (yields the estimates' progress records); returns
-    ``(disagreement, [path_a, path_b])``, or ``(nan, [])`` when the data are
-    too small to split.
+    A generator: yields ``(part, record)``, the part (0 or 1) and each
+    progress record of its estimate; returns ``(disagreement, [path_a,
+    path_b])``, or ``(nan, [])`` when the data are too small to split.
     """
     parts = split_parts(gs, windows, frame_shape)
     if parts is None:
         return float("nan"), []
     cps = []
-    for part, frames in parts:
-        est = yield from iter_alternating(part, p, device, rng, box, None, frames)
+    for i, (part, frames) in enumerate(parts):
+        est = yield from relay(iter_alternating(part, p, device, rng, box, None, frames), lambda rec, i=i: (i, rec))
         cps.append(center_path(est.control_points, p.n_times))
     frame = (windows[0][0], windows[0][1], *frame_shape)
     return path_disagreement(gs[0], cps[0], cps[1], p.n_times, frame), cps
@@ -271,15 +271,20 @@ def iter_verdict(g, est, p: BlindParams, device, frame=None, split=None):
     """
     cp = center_path(est.control_points, p.n_times)
 
-    def report(_):  # placed at the start of the final stage: the fraction done stays monotone
-        return Progress(stage="evidence", iteration=0, n_iterations=1, loss=float("nan"),
-                        control_points=cp, stage_index=est.n_stages, n_stages=est.n_stages + 1)
+    def report(_, stage="evidence", loss=float("nan"), path=cp):
+        # placed at the start of the final stage: the fraction done stays monotone
+        return Progress(stage=stage, iteration=0, n_iterations=1, loss=loss, control_points=path,
+                        stage_index=est.n_stages, n_stages=est.n_stages + 1)
+
+    def report_part(item):  # the agreement check's estimates, with their own path and fit
+        i, rec = item
+        return report(None, f"evidence (agreement check, part {i + 1} of 2)", rec.loss, rec.control_points)
 
     evidence = yield from relay(blur_evidence(g, cp, p, device, frame), report)
     evidence.update(disagreement=float("nan"), agreement_paths=[])
     light = p.light_restoration
     if evidence["blur_found"] or not p.require_evidence or light * evidence["reach"] < MIN_REACH or split is None:
         return evidence, 0.0
-    disagreement, paths = yield from relay(iter_disagreement(*split[:3], p, device, *split[3:]), report)
+    disagreement, paths = yield from relay(iter_disagreement(*split[:3], p, device, *split[3:]), report_part)
     evidence.update(disagreement=disagreement, agreement_paths=[c.tolist() for c in paths])
     return evidence, light if disagreement <= AGREEMENT_MARGIN else 0.0

@@ -8,7 +8,7 @@ rotation: an ``(n, 6)`` path, plotted in a second panel),
 ``n_control_points``, ``n_iter`` (path iterations),
 ``tv_iter`` (final TV iterations), ``restore_anyway`` (restore even when
 the evidence test finds little blur), ``light_restoration`` (the scale of
-the path of a light restoration then, made when two halves of the data
+the path of a light restoration then, made when two parts of the data
 agree on the path; 0: the input), ``device``, ``seed``,
 ``infinity_disparity``, ``edge_anisotropy``, ``preview_every`` and an
 optional ``true_path`` layer. While it runs:
@@ -130,7 +130,7 @@ def _fields(viewer) -> list:
                  tooltip="restore with the estimated path even when the data give little evidence of blur "
                  "(BlindParams.require_evidence=False; default: return the input unchanged then)"),
         fspin("light_restoration", PRESETS["default"].light_restoration, 0.0, 1.0, 0.05, label="light restoration",
-              tooltip="when the data give little evidence of blur but two halves of them, estimated apart, agree "
+              tooltip="when the data give little evidence of blur but two parts of them, estimated apart, agree "
               "on the path, restore with the estimated path scaled by this factor instead of returning the "
               "input (BlindParams.light_restoration; 0: the input)"),
         device_choice(),
