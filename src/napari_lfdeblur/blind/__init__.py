@@ -62,9 +62,11 @@ Two algorithms, chosen by :attr:`BlindParams.method`:
 The path found, the data decide whether its blur is significant: the
 salient-edge objective with the path's blur must beat the one with no blur
 (the identity) by more than the noise floor and by a clear fraction, and the
-blur must move the image by a good part of a pixel. If not, the result is
-the input itself with a zero path, and ``info['blur_found']`` is False
-(docs/blind.md, "What makes it robust"). If so, every colour channel is
+blur must move the image by a good part of a pixel. If not,
+``info['blur_found']`` is False and the path is estimated again on two
+disjoint parts of the data: where they agree, the result is a light
+restoration with the path scaled by ``params.light_restoration``, else the
+input itself with a zero path (docs/blind.md, "What makes it robust"). If so, every colour channel is
 restored by the non-blind
 :func:`~napari_lfdeblur.deconvolution.deconvolve` with ``params.final``
 (4D TV in both presets), tile by tile when memory is short. Both methods

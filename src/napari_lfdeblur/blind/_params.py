@@ -340,8 +340,9 @@ class BlindParams(JsonParams):
         skips it and returns the blurred input as the light field.
     require_evidence : bool
         Restore only when the data give evidence of a significant blur
-        (docs/blind.md, "What makes it robust"); otherwise return the input
-        with a zero path. False: always restore with the path estimated
+        (docs/blind.md, "What makes it robust"); otherwise return a light
+        restoration (``light_restoration``) or the input with a zero path.
+        False: always restore with the path estimated
         (the evidence is still reported in ``BlindResult.info``).
     light_restoration : float
         In [0, 1]. When the evidence test finds little blur (with
