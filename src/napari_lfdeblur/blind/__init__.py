@@ -408,7 +408,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
         split = (gs, windows, (Y, X), rng, box)
     else:
         split = ([shear(t, d_inf) for t in gs], windows, (Y, X), rng, box)
-    evidence, light = yield from iter_verdict(split[0][0], est, p, dev, frame, split)
+    evidence, light = yield from iter_verdict(split, est, p, dev, frame)
     restore = evidence["blur_found"] or not p.require_evidence
     info.update(blur_found=evidence["blur_found"], evidence=evidence,
                 message=evidence_message(evidence, p.require_evidence, light),

@@ -251,15 +251,15 @@ def iter_disagreement(gs, windows, frame_shape, p: BlindParams, device, rng, box
     return path_disagreement(gs[0], cps[0], cps[1], p.n_times, frame), cps
 
 
-def iter_verdict(g, est, p: BlindParams, device, frame=None, split=None):
+def iter_verdict(split, est, p: BlindParams, device, frame=None):
     """The evidence stage: is the estimated blur significant, and if not, is a light restoration warranted?
 
-    ``g`` is the grayscale light field of the evidence test in the ``d_inf =
-    0`` model (refocused by ``d_inf``), ``est`` the path stage's
-    :class:`~napari_lfdeblur.blind._params.PathEstimate`, ``frame`` places
-    ``g`` in the view. ``split``: ``(gs, windows, frame_shape, rng, box)``,
-    the path stage's windows (refocused likewise) for :func:`iter_disagreement`,
-    which runs when the test finds little blur, ``p.require_evidence`` holds
+    ``split`` is ``(gs, windows, frame_shape, rng, box)``: the path stage's
+    grayscale windows in the ``d_inf = 0`` model (refocused by ``d_inf``),
+    their places in the view and what :func:`iter_disagreement` needs; the
+    evidence test reads the first window, which ``frame`` places in the view.
+    ``est`` is the path stage's :class:`~napari_lfdeblur.blind._params.PathEstimate`.
+    :func:`iter_disagreement` runs when the test finds little blur, ``p.require_evidence`` holds
     and the light restoration's path would move the image by at least
     :data:`MIN_REACH` px. The light restoration is made when the two parts
     agree within :data:`AGREEMENT_MARGIN`.
@@ -280,10 +280,10 @@ def iter_verdict(g, est, p: BlindParams, device, frame=None, split=None):
         i, rec = item
         return report(None, f"evidence (agreement check, part {i + 1} of 2)", rec.loss, rec.control_points)
 
-    evidence = yield from relay(blur_evidence(g, cp, p, device, frame), report)
+    evidence = yield from relay(blur_evidence(split[0][0], cp, p, device, frame), report)
     evidence.update(disagreement=float("nan"), agreement_paths=[])
     light = p.light_restoration
-    if evidence["blur_found"] or not p.require_evidence or light * evidence["reach"] < MIN_REACH or split is None:
+    if evidence["blur_found"] or not p.require_evidence or light * evidence["reach"] < MIN_REACH:
         return evidence, 0.0
     disagreement, paths = yield from relay(iter_disagreement(*split[:3], p, device, *split[3:]), report_part)
     evidence.update(disagreement=disagreement, agreement_paths=[c.tolist() for c in paths])
