@@ -168,7 +168,7 @@ def test_deconvolution_with_the_true_6dof_path_beats_the_3dof_part(d_inf):
     from napari_lfdeblur import deconvolve
     from napari_lfdeblur.samples import synthetic_scene
 
-    lf, _ = synthetic_scene((5, 5, 32, 32), seed=2)
+    lf, _ = synthetic_scene((3, 3, 24, 24), seed=2)
     cp = center_path(np.array([[-0.6, 0.2, 0.3, 0.02, -0.06, 0.05], [0.6, -0.3, -0.3, -0.02, 0.06, -0.05]]), 8)
     noise = np.random.default_rng(0).normal(0, 0.005, lf.shape).astype(np.float32)
     blurred = simulate_blur(lf, cp, n_times=8, infinity_disparity=d_inf) + noise
@@ -249,3 +249,42 @@ def test_path_helpers_with_rotation():
     both = roll.copy()
     both[:, 0] = [-1.0, 1.0]
     np.testing.assert_array_equal(canonical_time_direction(both), both)
+
+
+def _rotation_stage_records(rotation):
+    """Run the rotation stage on a small blurred scene; (path-fit records per alternation, fits kept)."""
+    from napari_lfdeblur.blind import BlindParams
+    from napari_lfdeblur.blind._params import PathEstimate
+    from napari_lfdeblur.blind._rotation import iter_rotation_fit
+    from napari_lfdeblur.samples import synthetic_scene
+
+    lf, _ = synthetic_scene((3, 3, 24, 24), seed=2)
+    cp3 = np.array([[-0.6, 0.2, 0.0], [0.1, -0.4, 0.0], [0.5, 0.2, 0.0]])
+    g = torch.as_tensor(simulate_blur(lf, cp3, n_times=16))[..., None]
+    p = BlindParams(motion="6dof").replace(rotation=rotation)
+    est = PathEstimate(cp3, [1], 1)
+    stage = iter_rotation_fit(g, est, p, torch.device("cpu"), (0, 0, 24, 24), (24, 24), 2.0)
+    fits, last = [], 0
+    try:
+        while True:
+            rec = next(stage)
+            if rec.info["phase"] == "latent" and last != "latent":
+                fits.append(0)
+            fits[-1] += rec.info["phase"] == "path fit"
+            last = rec.info["phase"]
+    except StopIteration as done:
+        result = done.value
+    return fits, result.info
+
+
+def test_rotation_stage_stops_when_the_fit_stalls_or_the_path_settles():
+    # never early: every start and every further alternation takes all its steps (10 per record)
+    fits, info = _rotation_stage_records({"n_outer": 3, "steps": 30, "fit_tol": 0.0, "path_tol": 0.0})
+    n_starts = len(info["rotation_start_fits"])
+    assert fits == [3] * (n_starts + 2) and len(info["rotation_fit"]) == 3
+    # a fit that must fall by 100 % per 10 steps stalls at its second record
+    fits, _ = _rotation_stage_records({"n_outer": 3, "steps": 30, "fit_tol": 1.0, "path_tol": 0.0})
+    assert fits == [2] * (n_starts + 2)
+    # any path counts as settled: the alternations stop after the first one past the starts
+    fits, info = _rotation_stage_records({"n_outer": 3, "steps": 30, "fit_tol": 0.0, "path_tol": 1e9})
+    assert fits == [3] * (n_starts + 1) and len(info["rotation_fit"]) == 2

@@ -242,17 +242,27 @@ class RotationFitParams(JsonParams):
         (``R r``) for the rotation.
     n_times : int
         Exposure instants of the model during the stage.
+    fit_tol : float
+        The path fit stops early when its loss fell by less than this
+        fraction over the last 10 steps (0: always ``steps`` steps).
+    path_tol : float
+        The alternations stop early when one moved the path by less than
+        this: the two paths' blurs of the data differ by less than
+        ``path_tol`` of the larger blur (0: always ``n_outer``).
     """
 
     n_outer: int = 4
     steps: int = 40
     lr: float = 0.05
     n_times: int = 8
+    fit_tol: float = 0.01
+    path_tol: float = 0.05
 
     _what = "blind rotation fit"
 
     def __post_init__(self):
-        _check(self, "BlindParams.rotation", ints={"n_outer": 1, "steps": 1, "n_times": 2}, positive=("lr",))
+        _check(self, "BlindParams.rotation", ints={"n_outer": 1, "steps": 1, "n_times": 2}, positive=("lr",),
+               nonneg=("fit_tol", "path_tol"))
 
 
 @dataclass(frozen=True)

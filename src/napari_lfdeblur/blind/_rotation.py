@@ -30,6 +30,7 @@ from ..progress import Progress
 from ._adam import Adam
 from ._alternating import relay
 from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
+from ._evidence import path_disagreement
 from ._latent import EdgeBlurred, edge_sigmas, l0_latent, n_hqs_steps
 from ._params import BlindParams, PathEstimate
 
@@ -41,8 +42,12 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
 
     Two starts each get one alternation: the translation found with zero
     rotation, and the same motion explained by rotation alone
-    (:func:`rotation_equivalent`). The better fit goes on for the
-    remaining ``p.rotation.n_outer - 1`` alternations.
+    (:func:`rotation_equivalent`). The better fit goes on for up to
+    ``p.rotation.n_outer - 1`` more alternations, and stops once one moves
+    the path by less than ``p.rotation.path_tol``
+    (:func:`~napari_lfdeblur.blind._evidence.path_disagreement`). Each path
+    fit stops once its loss falls by less than ``p.rotation.fit_tol`` over
+    10 steps.
 
     Parameters
     ----------
@@ -78,8 +83,11 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
     cp, latent, loss = min(tried, key=lambda t: t[2])
     history = [loss]
     for _ in range(p.rotation.n_outer - 1):
+        previous = cp
         cp, latent, loss = yield from run.alternation(cp, latent)
         history.append(loss)
+        if path_disagreement(g, previous, cp, p.rotation.n_times, run.frame) < p.rotation.path_tol:
+            break  # the path has settled
     info = {**est.info, "rotation_fit": history, "rotation_start_fits": [t[2] for t in tried]}
     return PathEstimate(cp, est.factors, est.n_stages + 1, est.loss_history + history, info)
 
@@ -141,10 +149,14 @@ class _Stage:
         latent = yield from relay(l0_latent(EdgeBlurred(op, self.sigma), self.g, self.lam, self.p.latent, latent),
                                   lambda _x: self.record(cp, float("nan"), "latent"))
         fit = _Fit(self.g, latent, self.sigma, self.frame, rp, self.r_px, self.box, cp, self.device)
+        before = math.inf
         for step in range(1, rp.steps + 1):
             loss = fit.step()
             if step % 10 == 0 or step == rp.steps:
                 yield self.record(fit.control_points(), loss, "path fit")
+                if rp.fit_tol > 0 and before - loss < rp.fit_tol * before:
+                    break  # the fit has stalled
+                before = loss
         return fit.control_points(), latent, loss
 
 
