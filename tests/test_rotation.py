@@ -168,7 +168,7 @@ def test_deconvolution_with_the_true_6dof_path_beats_the_3dof_part(d_inf):
     from napari_lfdeblur import deconvolve
     from napari_lfdeblur.samples import synthetic_scene
 
-    lf, _ = synthetic_scene((3, 3, 24, 24), seed=2)
+    lf, _ = synthetic_scene((5, 5, 32, 32), seed=2)
     cp = center_path(np.array([[-0.6, 0.2, 0.3, 0.02, -0.06, 0.05], [0.6, -0.3, -0.3, -0.02, 0.06, -0.05]]), 8)
     noise = np.random.default_rng(0).normal(0, 0.005, lf.shape).astype(np.float32)
     blurred = simulate_blur(lf, cp, n_times=8, infinity_disparity=d_inf) + noise
@@ -256,6 +256,7 @@ def _rotation_stage_records(rotation):
     from napari_lfdeblur.blind import BlindParams
     from napari_lfdeblur.blind._params import PathEstimate
     from napari_lfdeblur.blind._rotation import iter_rotation_fit
+    from napari_lfdeblur.progress import run_to_completion
     from napari_lfdeblur.samples import synthetic_scene
 
     lf, _ = synthetic_scene((3, 3, 24, 24), seed=2)
@@ -263,17 +264,14 @@ def _rotation_stage_records(rotation):
     g = torch.as_tensor(simulate_blur(lf, cp3, n_times=16))[..., None]
     p = BlindParams(motion="6dof").replace(rotation=rotation)
     est = PathEstimate(cp3, [1], 1)
+    phases = []
     stage = iter_rotation_fit(g, est, p, torch.device("cpu"), (0, 0, 24, 24), (24, 24), 2.0)
-    fits, last = [], 0
-    try:
-        while True:
-            rec = next(stage)
-            if rec.info["phase"] == "latent" and last != "latent":
-                fits.append(0)
-            fits[-1] += rec.info["phase"] == "path fit"
-            last = rec.info["phase"]
-    except StopIteration as done:
-        result = done.value
+    result = run_to_completion(stage, lambda rec: phases.append(rec.info["phase"]))
+    fits = []  # each alternation: a run of latent records, then its path-fit records
+    for previous, phase in zip([None] + phases, phases):
+        if phase == "latent" and previous != "latent":
+            fits.append(0)
+        fits[-1] += phase == "path fit"
     return fits, result.info
 
 
