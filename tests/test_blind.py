@@ -671,6 +671,33 @@ def test_edge_blurred_operator_is_adjoint_and_commutes():
     np.testing.assert_allclose(one[:, :, 3:-3, 3:-3], 1.0, atol=1e-12)
 
 
+def test_warm_started_latent_takes_the_last_splitting_steps_and_keeps_a_converged_latent():
+    from napari_lfdeblur.samples import synthetic_scene
+
+    lf, _ = synthetic_scene((3, 3, 24, 24), seed=2)
+    cp = np.array([[-0.6, 0.2, 0.0], [0.1, -0.4, 0.0], [0.5, 0.2, 0.0]])
+    g = torch.as_tensor(simulate_blur(lf, cp, n_times=16))[..., None]
+    op = BlurOperator(tuple(g.shape), cp, n_times=16)
+    p, lam = LatentParams(), 2e-4
+    n_full = _latent.n_hqs_steps(lam, p)
+    assert n_full > 4 and _latent.n_hqs_steps(lam, p, 4) == 4 and _latent.n_hqs_steps(lam, p, 99) == n_full
+
+    def solve(x0, last=0):
+        records = []
+        x = run_to_completion(_latent.l0_latent(op, g, lam, p, x0, last), records.append)
+        return x, len(records)
+
+    full, n = solve(g.clone())
+    assert n == n_full * (p.n_cg + 1)
+    # more steps than the schedule has: the whole schedule, bit for bit
+    np.testing.assert_array_equal(solve(g.clone(), 99)[0].numpy(), full.numpy())
+    # from the converged latent, the last 4 steps stay by it; from the data, 4 steps do not get there
+    warm, n = solve(full.clone(), 4)
+    assert n == 4 * (p.n_cg + 1)
+    cold, _ = solve(g.clone(), 4)
+    assert float((warm - full).norm() / full.norm()) < 0.005 < float((cold - full).norm() / full.norm())
+
+
 def test_path_fit_finds_the_true_curved_path_from_the_sharp_latent():
     # with the true sharp light field as the latent, the batch of random starts must find the
     # global minimum of the fit: the true path

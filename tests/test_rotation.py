@@ -252,7 +252,7 @@ def test_path_helpers_with_rotation():
 
 
 def _rotation_stage_records(rotation):
-    """Run the rotation stage on a small blurred scene; (path-fit records per alternation, fits kept)."""
+    """Run the rotation stage on a small blurred scene; (latent and path-fit records per alternation, info)."""
     from napari_lfdeblur.blind import BlindParams
     from napari_lfdeblur.blind._params import PathEstimate
     from napari_lfdeblur.blind._rotation import iter_rotation_fit
@@ -267,22 +267,33 @@ def _rotation_stage_records(rotation):
     phases = []
     stage = iter_rotation_fit(g, est, p, torch.device("cpu"), (0, 0, 24, 24), (24, 24), 2.0)
     result = run_to_completion(stage, lambda rec: phases.append(rec.info["phase"]))
-    fits = []  # each alternation: a run of latent records, then its path-fit records
+    latents, fits = [], []  # each alternation: a run of latent records, then its path-fit records
     for previous, phase in zip([None] + phases, phases):
         if phase == "latent" and previous != "latent":
+            latents.append(0)
             fits.append(0)
+        latents[-1] += phase == "latent"
         fits[-1] += phase == "path fit"
-    return fits, result.info
+    return latents, fits, result.info
 
 
 def test_rotation_stage_stops_when_the_fit_stalls_or_the_path_settles():
-    # never early: every start and every further alternation takes all its steps (10 per record)
-    fits, info = _rotation_stage_records({"n_outer": 3, "steps": 30, "fit_tol": 0.0, "path_tol": 0.0})
+    from napari_lfdeblur.blind import BlindParams
+    from napari_lfdeblur.blind._latent import n_hqs_steps
+
+    # never early: every start and every further alternation takes all its steps (10 per record); the
+    # starts' latents take the whole splitting schedule, the later ones (warm-started) its last 2 steps
+    never = {"n_outer": 3, "steps": 30, "fit_tol": 0.0, "path_tol": 0.0, "warm_hqs_steps": 2}
+    latents, fits, info = _rotation_stage_records(never)
     n_starts = len(info["rotation_start_fits"])
     assert fits == [3] * (n_starts + 2) and len(info["rotation_fit"]) == 3
+    latent = BlindParams().latent
+    per_step = latent.n_cg + 1
+    cold = n_hqs_steps(latent.l0_weight * min(1.0, latent.l0_floor), latent) * per_step
+    assert cold > 2 * per_step and latents == [cold] * n_starts + [2 * per_step] * 2
     # a fit that must fall by 100 % per 10 steps stalls at its second record
-    fits, _ = _rotation_stage_records({"n_outer": 3, "steps": 30, "fit_tol": 1.0, "path_tol": 0.0})
+    _, fits, _ = _rotation_stage_records({**never, "fit_tol": 1.0})
     assert fits == [2] * (n_starts + 2)
     # any path counts as settled: the alternations stop after the first one past the starts
-    fits, info = _rotation_stage_records({"n_outer": 3, "steps": 30, "fit_tol": 0.0, "path_tol": 1e9})
+    _, fits, info = _rotation_stage_records({**never, "path_tol": 1e9})
     assert fits == [3] * (n_starts + 1) and len(info["rotation_fit"]) == 2

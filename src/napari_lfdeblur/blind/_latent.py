@@ -47,13 +47,21 @@ def cg(apply_A, b, x0, n_iter):
     return x
 
 
-def n_hqs_steps(lam: float, p: LatentParams) -> int:
-    """Splitting steps :func:`l0_latent` takes for ``lam`` (counted as its loop does)."""
-    beta, n = 2.0 * lam, 1
+def n_hqs_steps(lam: float, p: LatentParams, last: int = 0) -> int:
+    """Splitting steps :func:`l0_latent` takes for ``lam`` and ``last`` (counted as its loop does)."""
+    beta, n = _first_beta(lam, p, last), 1
     while 0 < beta < p.hqs_beta_max:
         beta = min(beta * p.hqs_kappa, p.hqs_beta_max)
         n += 1
     return n
+
+
+def _first_beta(lam: float, p: LatentParams, last: int) -> float:
+    """The splitting weight of the first step: ``2 lam``, or that of the ``last``-th step before the end."""
+    beta = 2.0 * lam
+    if last > 0:
+        beta = max(beta, p.hqs_beta_max / p.hqs_kappa ** (last - 1))
+    return beta
 
 
 def _axis_weights(angular_weight: float) -> tuple[float, float, float, float]:
@@ -71,11 +79,15 @@ def difference_pair(angular_weight: float):
 
 
 @torch.no_grad()  # torch's decorator enters no_grad at every resume of the generator only
-def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0: torch.Tensor):
+def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0: torch.Tensor, last: int = 0):
     """Salient-edge latent: ``min ||K l - f||^2 + lam ||grad l||_0`` by half-quadratic splitting.
 
     The gradient is over ``y, x`` and, with ``p.angular_weight > 0``, also
-    over ``v, u`` (weighted).
+    over ``v, u`` (weighted). The splitting weight ``beta`` grows from
+    ``2 lam`` by ``p.hqs_kappa`` per step up to ``p.hqs_beta_max``; with
+    ``last > 0`` only the last ``last`` steps of that schedule are taken (at
+    most all of them), for a warm start ``x0`` that is already a latent of
+    a nearby problem.
 
     A generator: yields the current latent after every conjugate-gradient
     iteration (``p.n_cg + 1`` per splitting step; the caller reports progress
@@ -94,7 +106,7 @@ def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0
     lap_weights = _axis_weights(p.angular_weight)
     Ktf = op.adjoint(f)
     x = x0
-    beta = 2.0 * lam
+    beta = _first_beta(lam, p, last)
     while True:
         g = grad(x)
         keep = sum(c * c for c in g) >= lam / beta

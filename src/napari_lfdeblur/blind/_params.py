@@ -249,6 +249,11 @@ class RotationFitParams(JsonParams):
         The alternations stop early when one moved the path by less than
         this: the two paths' blurs of the data differ by less than
         ``path_tol`` of the larger blur (0: always ``n_outer``).
+    warm_hqs_steps : int
+        Half-quadratic splitting steps of the latent of each alternation
+        after the starts': it starts from the previous latent, so only the
+        last steps of the splitting schedule, those of the largest weights
+        ``beta``, are taken (0: the whole schedule).
     """
 
     n_outer: int = 4
@@ -257,12 +262,13 @@ class RotationFitParams(JsonParams):
     n_times: int = 8
     fit_tol: float = 0.01
     path_tol: float = 0.05
+    warm_hqs_steps: int = 4
 
     _what = "blind rotation fit"
 
     def __post_init__(self):
-        _check(self, "BlindParams.rotation", ints={"n_outer": 1, "steps": 1, "n_times": 2}, positive=("lr",),
-               nonneg=("fit_tol", "path_tol"))
+        _check(self, "BlindParams.rotation", ints={"n_outer": 1, "steps": 1, "n_times": 2, "warm_hqs_steps": 0},
+               positive=("lr",), nonneg=("fit_tol", "path_tol"))
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,9 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
     Two starts each get one alternation: the translation found with zero
     rotation, and the same motion explained by rotation alone
     (:func:`rotation_equivalent`). The better fit goes on for up to
-    ``p.rotation.n_outer - 1`` more alternations, and stops once one moves
+    ``p.rotation.n_outer - 1`` more alternations, each latent warm-started
+    from the previous one with the last ``p.rotation.warm_hqs_steps``
+    splitting steps, and stops once one moves
     the path by less than ``p.rotation.path_tol``
     (:func:`~napari_lfdeblur.blind._evidence.path_disagreement`). Each path
     fit stops once its loss falls by less than ``p.rotation.fit_tol`` over
@@ -79,12 +81,12 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
         starts.append(rotation_equivalent(cp3, disparity, run.r_px))
     tried = []
     for cp in starts:
-        tried.append((yield from run.alternation(cp, g.clone())))
+        tried.append((yield from run.alternation(cp, g.clone(), 0)))
     cp, latent, loss = min(tried, key=lambda t: t[2])
     history = [loss]
     for _ in range(p.rotation.n_outer - 1):
         previous = cp
-        cp, latent, loss = yield from run.alternation(cp, latent)
+        cp, latent, loss = yield from run.alternation(cp, latent, p.rotation.warm_hqs_steps)
         history.append(loss)
         if path_disagreement(g, previous, cp, p.rotation.n_times, run.frame) < p.rotation.path_tol:
             break  # the path has settled
@@ -128,8 +130,10 @@ class _Stage:
         self.sigma = edge_sigmas(p.latent)
         self.stage, self.n_stages = stage, stage + 2  # then the evidence and the final stage
         rp = p.rotation
-        per_outer = n_hqs_steps(self.lam, p.latent) * (p.latent.n_cg + 1) + math.ceil(rp.steps / 10)
-        self.n_records = (rp.n_outer + 1) * per_outer
+        fit = math.ceil(rp.steps / 10)
+        cold = n_hqs_steps(self.lam, p.latent) * (p.latent.n_cg + 1) + fit  # the starts' alternations
+        warm = n_hqs_steps(self.lam, p.latent, rp.warm_hqs_steps) * (p.latent.n_cg + 1) + fit
+        self.n_records = 2 * cold + (rp.n_outer - 1) * warm
         self.tick = 0
 
     def extent(self, cp) -> float:
@@ -142,12 +146,13 @@ class _Stage:
                         n_iterations=self.n_records, loss=loss, control_points=np.array(cp),
                         stage_index=self.stage, n_stages=self.n_stages, info={"phase": phase})
 
-    def alternation(self, cp, latent):
-        """The latent under ``cp``, then the path fitted to it; returns ``(cp, latent, fit)``."""
+    def alternation(self, cp, latent, last):
+        """The latent under ``cp`` from ``latent`` (the last ``last`` splitting steps; 0: all), then the path
+        fitted to it; returns ``(cp, latent, fit)``."""
         rp = self.p.rotation
         op = BlurOperator(tuple(self.g.shape), cp, n_times=rp.n_times, frame=self.frame, device=self.device)
-        latent = yield from relay(l0_latent(EdgeBlurred(op, self.sigma), self.g, self.lam, self.p.latent, latent),
-                                  lambda _x: self.record(cp, float("nan"), "latent"))
+        latent = yield from relay(l0_latent(EdgeBlurred(op, self.sigma), self.g, self.lam, self.p.latent, latent,
+                                            last), lambda _x: self.record(cp, float("nan"), "latent"))
         fit = _Fit(self.g, latent, self.sigma, self.frame, rp, self.r_px, self.box, cp, self.device)
         before = math.inf
         for step in range(1, rp.steps + 1):
