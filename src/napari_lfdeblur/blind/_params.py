@@ -250,10 +250,8 @@ class RotationFitParams(JsonParams):
         this: the two paths' blurs of the data differ by less than
         ``path_tol`` of the larger blur (0: always ``n_outer``).
     warm_hqs_steps : int
-        Half-quadratic splitting steps of the latent of each alternation
-        after the starts': it starts from the previous latent, so only the
-        last steps of the splitting schedule, those of the largest weights
-        ``beta``, are taken (0: the whole schedule).
+        The latents after the starts' start from the previous latent and take
+        only this many last splitting steps (0: the whole schedule).
     """
 
     n_outer: int = 4
@@ -267,8 +265,8 @@ class RotationFitParams(JsonParams):
     _what = "blind rotation fit"
 
     def __post_init__(self):
-        _check(self, "BlindParams.rotation", ints={"n_outer": 1, "steps": 1, "n_times": 2, "warm_hqs_steps": 0},
-               positive=("lr",), nonneg=("fit_tol", "path_tol"))
+        ints = {"n_outer": 1, "steps": 1, "n_times": 2, "warm_hqs_steps": 0}
+        _check(self, "BlindParams.rotation", ints=ints, positive=("lr",), nonneg=("fit_tol", "path_tol"))
 
 
 @dataclass(frozen=True)
@@ -429,10 +427,7 @@ class BlindParams(JsonParams):
 PRESETS = {
     "default": BlindParams(),
     "paper": BlindParams(
-        method="joint",
-        n_control_points=4,
-        n_times=7,
-        final_n_times=7,
+        method="joint", n_control_points=4, n_times=7, final_n_times=7,
         joint=JointParams(n_iter=1000, lr=1.0, lf_lr=0.04, prior_weight=8e-3, prior_decay=0.997, prior_floor=0.1,
                           eps=0.12, eps_decay=0.997, eps_min=0.04),
         final=DeconvolutionParams(method="tv", weight=0.004, n_iter=100, tol=0.0, couple_channels=False),
