@@ -250,7 +250,7 @@ class RotationFitParams(JsonParams):
         this: the two paths' blurs of the data differ by less than
         ``path_tol`` of the larger blur (0: always ``n_outer``).
     warm_hqs_steps : int
-        The latents after the starts' start from the previous latent and take
+        The latents after the first start from the previous latent and take
         only this many last splitting steps (0: the whole schedule).
     """
 

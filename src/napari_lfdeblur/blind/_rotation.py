@@ -1,7 +1,8 @@
 """The rotation stage of 6-DOF blind estimation (``BlindParams(motion='6dof')``).
 
-The 3-DOF alternation estimates the translation first. Its path, with zero
-rotation, then starts an alternation over all six coordinates: the
+The 3-DOF alternation estimates the translation first. Its image motion,
+explained half by the translation and half by rotation, then starts an
+alternation over all six coordinates: the
 salient-edge latent under the current 6-DOF path
 (:func:`~napari_lfdeblur.blind._latent.l0_latent`), then Adam on the path's
 control points against that latent, in the gradient domain,
@@ -40,13 +41,13 @@ __all__ = ["iter_rotation_fit", "dominant_disparity", "rotation_equivalent"]
 def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device, window, frame_shape, box: float):
     """Refine a 3-DOF estimate into a 6-DOF path on the grayscale ``g`` (V, U, h, w, 1), ``d_inf = 0`` model.
 
-    Two starts each get one alternation: the translation found with zero
-    rotation, and the same motion explained by rotation alone
-    (:func:`rotation_equivalent`). The better fit goes on for up to
-    ``p.rotation.n_outer - 1`` more alternations, each latent warm-started
-    from the previous one with the last ``p.rotation.warm_hqs_steps``
-    splitting steps, and stops once one moves
-    the path by less than ``p.rotation.path_tol``
+    The start explains the image motion found half by the translation and
+    half by rotation (:func:`rotation_equivalent`): the two extremes move the
+    scene at its dominant disparity alike, and only the depths tell them
+    apart, so the fit starts between them. Up to ``p.rotation.n_outer``
+    alternations follow, each latent after the first warm-started from the
+    previous one with the last ``p.rotation.warm_hqs_steps`` splitting
+    steps; they stop once one moves the path by less than ``p.rotation.path_tol``
     (:func:`~napari_lfdeblur.blind._evidence.path_disagreement`). Each path
     fit stops once its loss falls by less than ``p.rotation.fit_tol`` over
     10 steps.
@@ -75,14 +76,11 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
     """
     run = _Stage(g, p, device, window, frame_shape, box, est.n_stages)
     cp3 = path_in_frame(est.control_points, window, frame_shape)
-    starts = [np.concatenate([cp3, np.zeros((len(cp3), 3))], axis=1)]
+    cp = np.concatenate([cp3, np.zeros((len(cp3), 3))], axis=1)
     disparity = dominant_disparity(g)
-    if abs(disparity) * run.extent(cp3) >= 0.1:  # the translation moves the image: try it as a rotation
-        starts.append(rotation_equivalent(cp3, disparity, run.r_px))
-    tried = []
-    for cp in starts:
-        tried.append((yield from run.alternation(cp, g.clone(), 0)))
-    cp, latent, loss = min(tried, key=lambda t: t[2])
+    if abs(disparity) * run.extent(cp3) >= 0.1:  # the translation moves the image: half of it as a rotation
+        cp = 0.5 * (cp + rotation_equivalent(cp3, disparity, run.r_px))
+    cp, latent, loss = yield from run.alternation(cp, g.clone(), 0)
     history = [loss]
     for _ in range(p.rotation.n_outer - 1):
         previous = cp
@@ -90,7 +88,7 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
         history.append(loss)
         if path_disagreement(g, previous, cp, p.rotation.n_times, run.frame) < p.rotation.path_tol:
             break  # the path has settled
-    info = {**est.info, "rotation_fit": history, "rotation_start_fits": [t[2] for t in tried]}
+    info = {**est.info, "rotation_fit": history}
     return PathEstimate(cp, est.factors, est.n_stages + 1, est.loss_history + history, info)
 
 
@@ -131,9 +129,9 @@ class _Stage:
         self.stage, self.n_stages = stage, stage + 2  # then the evidence and the final stage
         rp = p.rotation
         fit = math.ceil(rp.steps / 10)
-        cold = n_hqs_steps(self.lam, p.latent) * (p.latent.n_cg + 1) + fit  # the starts' alternations
+        cold = n_hqs_steps(self.lam, p.latent) * (p.latent.n_cg + 1) + fit  # the first alternation
         warm = n_hqs_steps(self.lam, p.latent, rp.warm_hqs_steps) * (p.latent.n_cg + 1) + fit
-        self.n_records = 2 * cold + (rp.n_outer - 1) * warm
+        self.n_records = cold + (rp.n_outer - 1) * warm
         self.tick = 0
 
     def extent(self, cp) -> float:
