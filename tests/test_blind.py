@@ -547,6 +547,8 @@ def test_bad_input_gives_clear_errors():
         LatentParams(edge_sigma_from=0)
     with pytest.raises(ValueError, match="disparity_weight"):
         PathFitParams(disparity_weight=-1.0)
+    with pytest.raises(ValueError, match="rotation.warm_hqs_steps"):
+        BlindParams().replace(rotation={"warm_hqs_steps": -1})
 
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf"), 4.5, -4.01])
