@@ -244,7 +244,8 @@ class RotationFitParams(JsonParams):
         Exposure instants of the model during the stage.
     fit_tol : float
         The path fit stops early when its loss fell by less than this
-        fraction over the last 10 steps (0: always ``steps`` steps).
+        fraction over the last 10 steps, the first 10 counted from the
+        loss after step 1 (0: always ``steps`` steps).
     path_tol : float
         The alternations stop early when one moved the path by less than
         this: the two paths' blurs of the data differ by less than

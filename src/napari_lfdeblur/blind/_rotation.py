@@ -50,7 +50,8 @@ def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device
     steps; they stop once one moves the path by less than ``p.rotation.path_tol``
     (:func:`~napari_lfdeblur.blind._evidence.path_disagreement`). Each path
     fit stops once its loss falls by less than ``p.rotation.fit_tol`` over
-    10 steps.
+    10 steps (the first 10 counted from the loss after step 1, so that a
+    fit that starts converged stops at its first check).
 
     Parameters
     ----------
@@ -155,6 +156,8 @@ class _Stage:
         before = math.inf
         for step in range(1, rp.steps + 1):
             loss = fit.step()
+            if step == 1:
+                before = loss  # the reference of the first check
             if step % 10 == 0 or step == rp.steps:
                 yield self.record(fit.control_points(), loss, "path fit")
                 if rp.fit_tol > 0 and before - loss < rp.fit_tol * before:
