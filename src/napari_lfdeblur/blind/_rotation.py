@@ -153,7 +153,6 @@ class _Stage:
         latent = yield from relay(l0_latent(EdgeBlurred(op, self.sigma), self.g, self.lam, self.p.latent, latent,
                                             last), lambda _x: self.record(cp, float("nan"), "latent"))
         fit = _Fit(self.g, latent, self.sigma, self.frame, rp, self.r_px, self.box, cp, self.device)
-        before = math.inf
         for step in range(1, rp.steps + 1):
             loss = fit.step()
             if step == 1:
