@@ -18,8 +18,10 @@ same image motion is a rotation 4.2 times larger there: what a user who
 deblurs a crop gets.
 
 For every case: the blurred input's PSNR; then, for the default solver
-(``motion='3dof'``, what users get today), ``motion='6dof'`` and the
-per-view 2D baseline, the PSNR, its gain over the input and the time; and
+(``motion='3dof'``, what users get today), ``motion='6dof'``, the
+per-view 2D baseline and the non-blind restoration with the true path
+(``deconvolve`` with the blind solver's final settings: what a perfect
+estimate would give), the PSNR, its gain over the input and the time; and
 for the two light-field solvers the blur mismatch of their path on the full
 6-DOF model, and that of the path they estimated (the same path, or the one
 their evidence test rejected when they returned the input). The table goes
@@ -99,13 +101,23 @@ def true_path(motion: str, seed: int, r_px: float, degrees=DEGREES) -> np.ndarra
     return center_path(np.concatenate([trans, rot], axis=1), RENDER_TIMES)
 
 
-def run_solver(name, blurred, d_inf, device, quick):
+def run_solver(name, blurred, d_inf, device, quick, true_cp=None):
     """(restored, control points or None, estimate or None, seconds) of one solver.
 
     The estimate is the path the solver found, also when its evidence test
     rejected it and returned the input (the control points are then zero).
+    ``'truepath'`` restores with ``true_cp``, non-blind.
     """
     t0 = time.perf_counter()
+    if name == "truepath":
+        from napari_lfdeblur.blind import BlindParams
+        from napari_lfdeblur.deconvolution import deconvolve
+        from napari_lfdeblur.path import center_path
+
+        p = BlindParams(motion="6dof")
+        restored = deconvolve(blurred, center_path(true_cp, p.final_n_times), n_times=p.final_n_times,
+                              infinity_disparity=d_inf, params=p.final, device=device)
+        return restored, None, None, time.perf_counter() - t0
     if name == "baseline2d":
         from _baseline2d import Baseline2DParams, deblur_views_2d  # benchmarks/_baseline2d.py
 
@@ -119,7 +131,7 @@ def run_solver(name, blurred, d_inf, device, quick):
     return res.lightfield, res.control_points, estimate, time.perf_counter() - t0
 
 
-SOLVERS = ("3dof", "6dof", "baseline2d")
+SOLVERS = ("3dof", "6dof", "baseline2d", "truepath")
 
 
 def evaluate(spec, device, quick, degrees=DEGREES) -> dict:
@@ -139,7 +151,7 @@ def evaluate(spec, device, quick, degrees=DEGREES) -> dict:
     row = {"case": name, "group": group, "motion": motion, "d_inf": d_inf, "input": base,
            "rotation_mrad": 1000 * float(np.abs(bezier_positions(cp, RENDER_TIMES)[:, 3:]).max())}
     for solver in SOLVERS:
-        restored, est, found, seconds = run_solver(solver, blurred, d_inf, device, quick)
+        restored, est, found, seconds = run_solver(solver, blurred, d_inf, device, quick, cp)
         row[solver] = psnr(restored, sharp, crop=crop) - base
         row[solver + "_s"] = seconds
         if est is not None:
@@ -156,23 +168,24 @@ def _line(r) -> str:
     solvers = "".join(f"{r[s]:+.2f} | {r[s + '_mismatch']:.2f} | {r[s + '_found']:.2f} | {r[s + '_s']:.0f} | "
                       for s in ("3dof", "6dof"))
     return (f"| {r['case']} | {r['group']} | {r['motion']} | {r['d_inf']:+.1f} | {r['rotation_mrad']:.1f} | "
-            f"{r['input']:.2f} | {solvers}{r['baseline2d']:+.2f} |")
+            f"{r['input']:.2f} | {solvers}{r['baseline2d']:+.2f} | {r['truepath']:+.2f} |")
 
 
 def _summary(rows) -> list[str]:
     out = ["| motion | cases | 3-DOF gain (dB) | 3-DOF mismatch | 3-DOF estimate's mismatch | 6-DOF gain (dB) "
            "| 6-DOF mismatch | 6-DOF estimate's mismatch | 6-DOF - 3-DOF (dB) | 6-DOF / 3-DOF time "
-           "| 2D baseline gain (dB) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "| 2D baseline gain (dB) | true path gain (dB) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for label, sel in (("rotation only", "rotation"), ("mixed", "mixed"), ("all", None)):
         rs = [r for r in rows if sel is None or r["motion"] == sel]
         if not rs:
             continue
         m = {k: float(np.mean([r[k] for r in rs])) for k in ("3dof", "3dof_mismatch", "3dof_found", "6dof",
-                                                             "6dof_mismatch", "6dof_found", "baseline2d")}
+                                                             "6dof_mismatch", "6dof_found", "baseline2d",
+                                                             "truepath")}
         ratio = float(np.mean([r["6dof_s"] / r["3dof_s"] for r in rs]))
         out.append(f"| {label} | {len(rs)} | {m['3dof']:+.2f} | {m['3dof_mismatch']:.2f} | {m['3dof_found']:.2f} | "
                    f"{m['6dof']:+.2f} | {m['6dof_mismatch']:.2f} | {m['6dof_found']:.2f} | "
-                   f"{m['6dof'] - m['3dof']:+.2f} | {ratio:.2f} | {m['baseline2d']:+.2f} |")
+                   f"{m['6dof'] - m['3dof']:+.2f} | {ratio:.2f} | {m['baseline2d']:+.2f} | {m['truepath']:+.2f} |")
     return out
 
 
@@ -189,14 +202,15 @@ def write(rows, args, argv, device):
         "the path a solver restored with on the full 6-DOF model (0 is perfect, 1 as bad as no blur; "
         "docs/model.md, *Judging an estimate*; 1.00 when it returned the input); *estimate's mismatch* is that of "
         "the path it estimated, also when its evidence test rejected it; times in seconds. The 3-DOF solver is "
-        "the default (`motion='3dof'`).",
+        "the default (`motion='3dof'`). *True path*: `deconvolve` with the true path and the blind solver's "
+        "final settings, what a perfect estimate would give.",
         "",
         *_summary(rows),
         "",
         "| case | scene | motion | d_inf | max rotation (mrad) | input PSNR | 3-DOF gain | 3-DOF mismatch "
         "| 3-DOF estimate's mismatch | 3-DOF s | 6-DOF gain | 6-DOF mismatch | 6-DOF estimate's mismatch | 6-DOF s "
-        "| 2D baseline gain |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| 2D baseline gain | true path gain |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *[_line(r) for r in rows],
     ]
     path = _report.table_path(args.out, __file__, args.quick)
