@@ -31,7 +31,7 @@ from ..progress import Progress
 from ._adam import Adam
 from ._alternating import relay
 from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
-from ._evidence import path_disagreement
+from ._evidence import evidence_weight, path_disagreement
 from ._latent import EdgeBlurred, edge_sigmas, l0_latent, n_hqs_steps
 from ._params import BlindParams, PathEstimate
 
@@ -125,7 +125,7 @@ class _Stage:
         self.g, self.p, self.device, self.box = g, p, device, box
         self.frame = (window[0], window[1], *frame_shape)
         self.r_px = max(frame_shape) / 2.0
-        self.lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
+        self.lam = evidence_weight(p)  # the alternation's smallest latent weight
         self.sigma = edge_sigmas(p.latent)
         self.stage, self.n_stages = stage, stage + 2  # then the evidence and the final stage
         rp = p.rotation
