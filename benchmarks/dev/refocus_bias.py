@@ -44,8 +44,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import blind_eval as ev  # noqa: E402  (benchmarks/blind_eval.py)
 
-CROP = 8
-
 
 def main(argv=None):
     ap = ev.dev_study_parser(__doc__)
@@ -78,7 +76,7 @@ def main(argv=None):
         clean = simulate_blur(sharp, cp, n_times=128, infinity_disparity=d)
         s_sharp = refocus(sharp, d)
         in_model = simulate_blur(s_sharp, cp, n_times=128)
-        inner = (slice(None), slice(None), slice(CROP, -CROP), slice(CROP, -CROP))
+        inner = (slice(None), slice(None), slice(ev.CROP, -ev.CROP), slice(ev.CROP, -ev.CROP))
         s_clean = refocus(clean, d)
         gap = np.linalg.norm((s_clean - in_model)[inner]) / np.linalg.norm((s_clean - s_sharp)[inner])
         noise = case.blurred - simulate_blur(case.sharp, cp, n_times=128, infinity_disparity=d)
