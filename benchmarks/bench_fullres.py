@@ -28,7 +28,10 @@ Reported: seconds by stage (path, final), peak memory above the input (resident 
 blur mismatch of the path on the central 128 x 128 crop of the sharp light field, the same for the full
 and the crop pipeline: the true path and the path found on the whole light field are both moved into the
 crop's own coordinates (``path_in_window``), where the crop pipeline's path already is. Also the gain of
-every pipeline on the central crop alone (its 8-px border left out), which compares them like for like.
+every pipeline on the central crop alone (its 8-px border left out), which compares them like for like; the
+gain of the central crop restored on its own with the whole pipeline's path (same final stage, so a difference
+from the crop pipeline is the path's); and the length of each path (RMS spread of its in-plane positions) over
+the true path's.
 The table goes to ``docs/benchmarks/bench_fullres.md`` (or ``--out``).
 """
 
@@ -76,6 +79,14 @@ def central(a, size=CROP):
     return a[:, :, y0 : y0 + h, x0 : x0 + w]
 
 
+def spread(cp) -> float:
+    """RMS distance (views) of a path's in-plane positions from their mean, over 64 instants."""
+    from napari_lfdeblur.path import bezier_positions
+
+    pos = bezier_positions(np.asarray(cp)[:, :3], 64)[:, :2]
+    return float(np.sqrt(((pos - pos.mean(axis=0)) ** 2).sum(axis=1).mean()))
+
+
 def run_case(name: str, device: str, noise: float, max_memory: float | None = None) -> dict:
     """Everything of one case, in this process; ``max_memory`` (x the input's size) adds a capped whole run."""
     from napari_lfdeblur import deconvolve, simulate_blur
@@ -91,9 +102,12 @@ def run_case(name: str, device: str, noise: float, max_memory: float | None = No
     window = central_window(sharp.shape[2:4])
     true_on_crop = path_in_window(PATH, window, sharp.shape[2:4])  # the blur the crop has, in its coordinates
 
+    def on_crop_path(cp, label):
+        return cp if label == "crop" else path_in_window(cp, window, sharp.shape[2:4])
+
     def mismatch(cp, label):
-        on_crop = cp if label == "crop" else path_in_window(cp, window, sharp.shape[2:4])
-        return path_error(on_crop, true_on_crop, lightfield=ref_crop, infinity_disparity=d_inf).blur_mismatch
+        return path_error(on_crop_path(cp, label), true_on_crop, lightfield=ref_crop,
+                          infinity_disparity=d_inf).blur_mismatch
 
     def on_crop_gain(restored_crop):  # both pipelines judged alike: on the central crop, its border excluded
         return psnr(restored_crop, ref_crop, crop=BORDER) - psnr(central(blurred), ref_crop, crop=BORDER)
@@ -125,9 +139,14 @@ def run_case(name: str, device: str, noise: float, max_memory: float | None = No
                       "gain_on_crop": on_crop_gain(anyway if label == "crop" else central(anyway)),
                       "mismatch": mismatch(estimate, label), "windows": res.info["windows"],
                       "tile": res.info.get("tile")}
-        if label != "crop":  # the path found, judged on the whole frame too
+        out[label]["length"] = spread(on_crop_path(estimate, label)) / spread(true_on_crop)
+        if label != "crop":  # the path found, judged on the whole frame too, and restoring the crop alone
             out[label]["mismatch_whole"] = path_error(estimate, PATH, lightfield=sharp,
                                                       infinity_disparity=d_inf).blur_mismatch
+            p = res.params
+            crossed = deconvolve(central(blurred), on_crop_path(estimate, label), n_times=p.final_n_times,
+                                 infinity_disparity=d_inf, device=device, params=p.final)
+            out[label]["gain_crossed"] = on_crop_gain(crossed)
         print(f"{name} {label}: {out[label]}", file=sys.stderr, flush=True)
     with PeakMemory(device) as mem:
         t0 = time.perf_counter()
@@ -142,9 +161,9 @@ def run_case(name: str, device: str, noise: float, max_memory: float | None = No
 
 def table(rows, max_memory=None) -> list[str]:
     lines = ["| case | d_inf | pipeline | restoration | time s (path + final) | peak memory (x input) | "
-             "gain dB, default | gain dB, restored anyway | on the crop, restored anyway | blur mismatch on the crop | "
-             "on the whole frame |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "gain dB, default | gain dB, restored anyway | on the crop, restored anyway | "
+             "the crop alone, this path | blur mismatch on the crop | on the whole frame | length (x true) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         for label in ("full", "crop", "capped"):
             if label not in r:
@@ -155,14 +174,15 @@ def table(rows, max_memory=None) -> list[str]:
                 tiles = f"{o['tile'][0]}x{o['tile'][1]} tiles" if o["tile"] else "not tiled"
                 size += f", max_memory {max_memory:g}x input ({tiles})"
             whole = f"{o['mismatch_whole']:.3f}" if label != "crop" else "—"
+            crossed = f"{o['gain_crossed']:+.2f}" if label != "crop" else "—"
             lines.append(f"| {r['case']} | {r['d_inf']:+g} | blind, {size} | {o['restoration']} | "
                          f"{o['seconds']:.1f} ({o['path_s']:.1f} + {o['final_s']:.1f}) | {o['memory_x']:.1f} | "
-                         f"{o['gain_default']:+.2f} | {o['gain_anyway']:+.2f} | {o['gain_on_crop']:+.2f} | "
-                         f"{o['mismatch']:.3f} | {whole} |")
+                         f"{o['gain_default']:+.2f} | {o['gain_anyway']:+.2f} | {o['gain_on_crop']:+.2f} | {crossed} | "
+                         f"{o['mismatch']:.3f} | {whole} | {o['length']:.2f} |")
         t = r["truepath"]
         lines.append(f"| {r['case']} | {r['d_inf']:+g} | non-blind, true path, whole | — | {t['seconds']:.1f} | "
-                     f"{t['memory_x']:.1f} | {t['gain']:+.2f} | {t['gain']:+.2f} | {t['gain_on_crop']:+.2f} | "
-                     "— | — |")
+                     f"{t['memory_x']:.1f} | {t['gain']:+.2f} | {t['gain']:+.2f} | {t['gain_on_crop']:+.2f} | — | "
+                     "— | — | 1.00 |")
     return lines
 
 
@@ -207,7 +227,12 @@ def main(argv=None):
         "central 128 x 128 crop of the sharp light field, with every path in the crop's own coordinates, and for "
         "the whole pipeline also on the whole sharp light field. *On the crop*: the gain of each pipeline on the "
         f"central crop alone, its {BORDER}-px border left out, so that the two compare like for like (the whole "
-        "pipeline's own gain is over the whole frame, whose content differs from the crop's). Peak memory: above "
+        "pipeline's own gain is over the whole frame, whose content differs from the crop's). *The crop alone, this "
+        "path*: the central crop restored on its own (`deconvolve`, the final stage's settings) with the whole "
+        "pipeline's estimate moved into the crop's coordinates; where it equals the whole pipeline's gain on the "
+        "crop, the two final stages agree and any difference from the crop pipeline is the path's. *Length*: "
+        "the RMS spread of the estimate's in-plane positions over the true path's, both in the crop's "
+        "coordinates (1: the right length; above 1: too long). Peak memory: above "
         "the input, in units of its size."
         + (f" *max_memory*: the whole pipeline again with `max_memory` set to {args.max_memory:g} times the "
            "input's size (the final stage then runs in tiles where the estimate says the whole would not fit)."
