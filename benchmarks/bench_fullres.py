@@ -13,7 +13,7 @@ Cases (each blurred by the same known path with ``p_z != 0``, 64 instants, plus 
   scene disparities about -0.9 to -0.4 px/view) with ``d_inf = 0`` / ``-1`` (skipped when the
   capture is missing).
 
-For each case, in its own process (so that peak memories do not mix):
+For each case, each run in its own process (so that peak memories do not mix):
 
 - ``blind_deblur`` with the default parameters on the whole light field (what a user gets: a full
   restoration when the evidence test finds the blur, else a light restoration or the input), timed; and,
@@ -87,8 +87,13 @@ def spread(cp) -> float:
     return float(np.sqrt(((pos - pos.mean(axis=0)) ** 2).sum(axis=1).mean()))
 
 
-def run_case(name: str, device: str, noise: float, max_memory: float | None = None) -> dict:
-    """Everything of one case, in this process; ``max_memory`` (x the input's size) adds a capped whole run."""
+RUNS = ("full", "crop", "capped", "truepath")
+
+
+def run_case(name: str, run: str, device: str, noise: float, max_memory: float | None = None) -> dict:
+    """One run of one case, in this process (so that its peak memory is its own): ``run`` is ``'full'``
+    (the blind pipeline on the whole light field), ``'crop'`` (on the central crop), ``'capped'`` (the whole
+    again with ``max_memory`` times the input's size) or ``'truepath'`` (non-blind, the true path)."""
     from napari_lfdeblur import deconvolve, simulate_blur
     from napari_lfdeblur.blind import blind_deblur
     from napari_lfdeblur.metrics import path_error, psnr
@@ -102,60 +107,52 @@ def run_case(name: str, device: str, noise: float, max_memory: float | None = No
     window = central_window(sharp.shape[2:4])
     true_on_crop = path_in_window(PATH, window, sharp.shape[2:4])  # the blur the crop has, in its coordinates
 
-    def on_crop_path(cp, label):
-        return cp if label == "crop" else path_in_window(cp, window, sharp.shape[2:4])
-
-    def mismatch(cp, label):
-        return path_error(on_crop_path(cp, label), true_on_crop, lightfield=ref_crop,
-                          infinity_disparity=d_inf).blur_mismatch
+    def on_crop_path(cp):
+        return cp if run == "crop" else path_in_window(cp, window, sharp.shape[2:4])
 
     def on_crop_gain(restored_crop):  # both pipelines judged alike: on the central crop, its border excluded
         return psnr(restored_crop, ref_crop, crop=BORDER) - psnr(central(blurred), ref_crop, crop=BORDER)
 
     row = {"case": name, "scene": scene, "d_inf": d_inf, "shape": list(sharp.shape),
            "blurred_psnr": psnr(blurred, sharp), "crop_blurred_psnr": psnr(central(blurred), ref_crop)}
-    out = {}
-    runs = [("full", blurred, None), ("crop", central(blurred), None)]
-    if max_memory:
-        runs.append(("capped", blurred, max_memory * blurred.nbytes))
-    for label, data, cap in runs:
+    if run == "truepath":
         with PeakMemory(device) as mem:
             t0 = time.perf_counter()
-            res = blind_deblur(data, infinity_disparity=d_inf, device=device, max_memory=cap)
+            restored = deconvolve(blurred, PATH, n_times=32, infinity_disparity=d_inf, device=device)
             seconds = time.perf_counter() - t0
-        truth = ref_crop if label == "crop" else sharp
-        found = bool(res.info["blur_found"])
-        estimate = res.info.get("rejected_path", res.control_points)  # the whole path estimated
-        anyway = res.lightfield
-        if not found:
-            p = res.params
-            anyway = deconvolve(data, estimate, n_times=p.final_n_times, infinity_disparity=d_inf, device=device,
-                                params=p.final)
-        out[label] = {"seconds": seconds, "path_s": res.timings["path"], "final_s": res.timings["final"],
-                      "memory_x": mem.delta_mib * 2**20 / data.nbytes, "blur_found": found,
-                      "restoration": res.info["restoration"],
-                      "gain_anyway": psnr(anyway, truth) - psnr(data, truth),
-                      "gain_default": psnr(res.lightfield, truth) - psnr(data, truth),
-                      "gain_on_crop": on_crop_gain(anyway if label == "crop" else central(anyway)),
-                      "mismatch": mismatch(estimate, label), "windows": res.info["windows"],
-                      "tile": res.info.get("tile")}
-        out[label]["length"] = spread(on_crop_path(estimate, label)) / spread(true_on_crop)
-        if label != "crop":  # the path found, judged on the whole frame too, and restoring the crop alone
-            out[label]["mismatch_whole"] = path_error(estimate, PATH, lightfield=sharp,
-                                                      infinity_disparity=d_inf).blur_mismatch
-            p = res.params
-            crossed = deconvolve(central(blurred), on_crop_path(estimate, label), n_times=p.final_n_times,
-                                 infinity_disparity=d_inf, device=device, params=p.final)
-            out[label]["gain_crossed"] = on_crop_gain(crossed)
-        print(f"{name} {label}: {out[label]}", file=sys.stderr, flush=True)
+        row[run] = {"seconds": seconds, "memory_x": mem.delta_mib * 2**20 / blurred.nbytes,
+                    "gain": psnr(restored, sharp) - row["blurred_psnr"],
+                    "gain_on_crop": on_crop_gain(central(restored))}
+        return row
+    data, truth = (central(blurred), ref_crop) if run == "crop" else (blurred, sharp)
+    cap = max_memory * blurred.nbytes if run == "capped" else None
     with PeakMemory(device) as mem:
         t0 = time.perf_counter()
-        restored = deconvolve(blurred, PATH, n_times=32, infinity_disparity=d_inf, device=device)
+        res = blind_deblur(data, infinity_disparity=d_inf, device=device, max_memory=cap)
         seconds = time.perf_counter() - t0
-    out["truepath"] = {"seconds": seconds, "memory_x": mem.delta_mib * 2**20 / blurred.nbytes,
-                       "gain": psnr(restored, sharp) - row["blurred_psnr"],
-                       "gain_on_crop": on_crop_gain(central(restored))}
-    row.update(out)
+    found, p = bool(res.info["blur_found"]), res.params
+    estimate = res.info.get("rejected_path", res.control_points)  # the whole path estimated
+    anyway = res.lightfield
+    if not found:
+        anyway = deconvolve(data, estimate, n_times=p.final_n_times, infinity_disparity=d_inf, device=device,
+                            params=p.final)
+    out = {"seconds": seconds, "path_s": res.timings["path"], "final_s": res.timings["final"],
+           "memory_x": mem.delta_mib * 2**20 / data.nbytes, "blur_found": found,
+           "restoration": res.info["restoration"],
+           "gain_anyway": psnr(anyway, truth) - psnr(data, truth),
+           "gain_default": psnr(res.lightfield, truth) - psnr(data, truth),
+           "gain_on_crop": on_crop_gain(anyway if run == "crop" else central(anyway)),
+           "mismatch": path_error(on_crop_path(estimate), true_on_crop, lightfield=ref_crop,
+                                  infinity_disparity=d_inf).blur_mismatch,
+           "length": spread(on_crop_path(estimate)) / spread(true_on_crop),
+           "windows": res.info["windows"], "tile": res.info.get("tile")}
+    if run != "crop":  # the path found, judged on the whole frame too, and restoring the crop alone
+        out["mismatch_whole"] = path_error(estimate, PATH, lightfield=sharp, infinity_disparity=d_inf).blur_mismatch
+        crossed = deconvolve(central(blurred), on_crop_path(estimate), n_times=p.final_n_times,
+                             infinity_disparity=d_inf, device=device, params=p.final)
+        out["gain_crossed"] = on_crop_gain(crossed)
+    print(f"{name} {run}: {out}", file=sys.stderr, flush=True)
+    row[run] = out
     return row
 
 
@@ -193,14 +190,15 @@ def main(argv=None):
     parser.add_argument("--noise", type=float, default=0.005)
     parser.add_argument("--max-memory", type=float, default=None, metavar="X",
                         help="also run the whole blind pipeline with max_memory = X times the input's size")
-    parser.add_argument("--case-json", help=argparse.SUPPRESS)  # internal: run one case, print its JSON
+    parser.add_argument("--case-json", help=argparse.SUPPRESS)  # internal: run CASE:RUN, print its JSON
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
     from napari_lfdeblur.devices import select_device
 
     device = str(select_device(args.device))
     if args.case_json:
-        print(json.dumps(run_case(args.case_json, device, args.noise, args.max_memory)))
+        name, run = args.case_json.split(":")
+        print(json.dumps(run_case(name, run, device, args.noise, args.max_memory)))
         return 0
     rows, skipped = [], []
     for name in args.cases.split(","):
@@ -208,12 +206,15 @@ def main(argv=None):
             skipped.append(f"- `{name}`: the Illum capture is not available")
             continue
         cap = ["--max-memory", str(args.max_memory)] if args.max_memory else []
-        proc = subprocess.run([sys.executable, __file__, "--case-json", name, "--device", device,
-                               "--noise", str(args.noise), *cap], capture_output=True, text=True, check=False)
-        if proc.returncode != 0:
-            print(proc.stderr, file=sys.stderr)
-            raise SystemExit(f"case {name} failed")
-        rows.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+        row = {}
+        for run in RUNS if args.max_memory else [r for r in RUNS if r != "capped"]:
+            proc = subprocess.run([sys.executable, __file__, "--case-json", f"{name}:{run}", "--device", device,
+                                   "--noise", str(args.noise), *cap], capture_output=True, text=True, check=False)
+            if proc.returncode != 0:
+                print(proc.stderr, file=sys.stderr)
+                raise SystemExit(f"case {name} ({run}) failed")
+            row.update(json.loads(proc.stdout.strip().splitlines()[-1]))
+        rows.append(row)
     body = [
         f"Each case: the sharp light field blurred by one known path (control points {PATH.tolist()}, 64 "
         f"instants) plus noise of sigma {args.noise:g}. Blind: `blind_deblur` with the default parameters; the "
@@ -233,7 +234,7 @@ def main(argv=None):
         "crop, the two final stages agree and any difference from the crop pipeline is the path's. *Length*: "
         "the RMS spread of the estimate's in-plane positions over the true path's, both in the crop's "
         "coordinates (1: the right length; above 1: too long). Peak memory: above "
-        "the input, in units of its size."
+        "the input, in units of its size, each run in a process of its own."
         + (f" *max_memory*: the whole pipeline again with `max_memory` set to {args.max_memory:g} times the "
            "input's size (the final stage then runs in tiles where the estimate says the whole would not fit)."
            if args.max_memory else ""),
