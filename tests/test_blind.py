@@ -809,6 +809,8 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
                               final_n_times=8)
     full = blind.estimate_blind_memory(blurred.shape, p)
     monkeypatch.setattr(devices, "free_memory", lambda device: full // 2)
+    releases = []
+    monkeypatch.setattr(blind, "release_host_memory", lambda: releases.append(1))
     with pytest.warns(RuntimeWarning, match="overlapping tiles"):
         gen = with_previews(iter_blind_deblur(blurred, params=p, device="cpu"), 5)
     stages, previews = set(), []
@@ -820,6 +822,8 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
 
     res = run_to_completion(gen, collect)
     assert res.info["tile"][0] < 72 and any(s.startswith("final (tile 2/") for s in stages)
+    n_tiles = int(next(s for s in stages if s.startswith("final (tile ")).split("/")[1].rstrip(")"))
+    assert len(releases) == n_tiles + 1  # freed memory handed back after the noise estimate and after each tile
     # the path-stage previews show the path's window where it is in the full frame, edge-padded around it
     y0, x0, h, w = res.info["window"]
     assert (h, w) == (40, 40) and previews

@@ -5,7 +5,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from napari_lfdeblur._memory import host_available_memory
+from napari_lfdeblur import _memory
+from napari_lfdeblur._memory import host_available_memory, release_host_memory
 from napari_lfdeblur.devices import free_memory, select_device
 
 
@@ -48,3 +49,28 @@ def test_cpu_fallback_passes_a_cpu_run_through_and_reraises_cpu_errors():
 
     with pytest.raises(torch.cuda.OutOfMemoryError):  # no fall-back from the CPU itself
         run_to_completion(run_with_cpu_fallback(failing, torch.device("cpu")))
+
+
+def test_release_host_memory_trims_glibc_heaps_on_linux_only(monkeypatch):
+    calls = []
+
+    class Libc:
+        def malloc_trim(self, pad):
+            calls.append(pad)
+            return 1
+
+    monkeypatch.setattr(_memory.ctypes, "CDLL", lambda name: Libc())
+    monkeypatch.setattr(_memory.sys, "platform", "linux")
+    release_host_memory()
+    assert calls == [0]  # trim everything above the heap's top, keep no padding
+    monkeypatch.setattr(_memory.sys, "platform", "darwin")
+    release_host_memory()
+    assert calls == [0]  # not called elsewhere
+
+    class NoTrim:  # a C library without malloc_trim (musl)
+        pass
+
+    monkeypatch.setattr(_memory.sys, "platform", "linux")
+    monkeypatch.setattr(_memory.ctypes, "CDLL", lambda name: NoTrim())
+    release_host_memory()  # no error
+

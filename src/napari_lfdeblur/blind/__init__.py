@@ -97,6 +97,7 @@ import torch
 
 from .. import devices
 from .._lightfield import check_number
+from .._memory import release_host_memory
 from ..blur import validate_lightfield
 from ..path import bezier_positions, canonical_time_direction, center_path, path_in_frame
 from ..progress import Progress, run_to_completion
@@ -440,6 +441,7 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
     if final.weight is None:  # one weight for the whole light field, so that tiles agree
         n_channels = arr.shape[4] if arr.ndim == 5 else 1
         final = final.replace(weight=final.effective_weight(final.method, estimate_noise_sigma(arr), n_channels))
+        release_host_memory()  # the noise estimate's work, before the final stage allocates its own
     if tile is None:
         parts = [((slice(None), slice(None)), (slice(None), slice(None)))]
         out = None
@@ -468,6 +470,8 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
             out = res
         else:
             out[:, :, core[0], core[1]] = res[:, :, inner[0], inner[1]]
+            del res, gen
+            release_host_memory()  # the tile's freed work, before the next tile allocates its own
     return out
 
 
