@@ -1,4 +1,7 @@
-"""Free host memory, for checks before large allocations (no torch, no Qt)."""
+"""Host memory: how much is free, for checks before large allocations, and handing freed memory back.
+
+No torch, no Qt.
+"""
 
 from __future__ import annotations
 
