@@ -49,7 +49,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _report  # noqa: E402  (benchmarks/_report.py)
 import eval_set  # noqa: E402
-from blind_eval import PeakMemory  # noqa: E402
+from blind_eval import PeakMemory, path_spread  # noqa: E402
 
 #: name -> (scene, d_inf)
 CASES = {"synthetic0": ("synthetic", 0.0), "synthetic1": ("synthetic", 1.0), "illum0": ("Illum", 0.0),
@@ -77,14 +77,6 @@ def central_window(frame_shape, size=CROP) -> tuple:
 def central(a, size=CROP):
     y0, x0, h, w = central_window(a.shape[2:4], size)
     return a[:, :, y0 : y0 + h, x0 : x0 + w]
-
-
-def spread(cp) -> float:
-    """RMS distance (views) of a path's in-plane positions from their mean, over 64 instants."""
-    from napari_lfdeblur.path import bezier_positions
-
-    pos = bezier_positions(np.asarray(cp)[:, :3], 64)[:, :2]
-    return float(np.sqrt(((pos - pos.mean(axis=0)) ** 2).sum(axis=1).mean()))
 
 
 RUNS = ("full", "crop", "capped", "truepath")
@@ -144,7 +136,7 @@ def run_case(name: str, run: str, device: str, noise: float, max_memory: float |
            "gain_on_crop": on_crop_gain(anyway if run == "crop" else central(anyway)),
            "mismatch": path_error(on_crop_path(estimate), true_on_crop, lightfield=ref_crop,
                                   infinity_disparity=d_inf).blur_mismatch,
-           "length": spread(on_crop_path(estimate)) / spread(true_on_crop),
+           "length": path_spread(on_crop_path(estimate), 64) / path_spread(true_on_crop, 64),
            "windows": res.info["windows"], "tile": res.info.get("tile")}
     if run != "crop":  # the path found, judged on the whole frame too, and restoring the crop alone
         out["mismatch_whole"] = path_error(estimate, PATH, lightfield=sharp, infinity_disparity=d_inf).blur_mismatch

@@ -113,6 +113,14 @@ def make_case(spec: eval_set.CaseSpec, quick: bool = False) -> Case:
     return Case(spec, sharp, eval_set.blurred_lightfield(spec, sharp, cp), cp)
 
 
+def path_spread(cp, n_times: int = 128) -> float:
+    """RMS distance (views) of a path's in-plane positions from their mean, over ``n_times`` instants."""
+    from napari_lfdeblur.path import bezier_positions
+
+    pos = bezier_positions(np.asarray(cp, dtype=np.float64)[:, :3], n_times)[:, :2]
+    return float(np.sqrt(((pos - pos.mean(axis=0)) ** 2).sum(axis=1).mean()))
+
+
 def select_cases(split: str, names=None, quick: bool = False):
     """The cases to run and the ones skipped (name -> why): a real capture may be missing."""
     specs = list(eval_set.split_cases(split))

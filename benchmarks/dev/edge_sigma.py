@@ -32,15 +32,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import blind_eval as ev  # noqa: E402  (benchmarks/blind_eval.py)
 
 
-def spread(cp) -> float:
-    """RMS distance (views) of the path's in-plane positions from their mean."""
-    from napari_lfdeblur.path import bezier_positions
-
-    pos = bezier_positions(np.asarray(cp, dtype=np.float64), 128)[:, :2]
-    pos = pos - pos.mean(axis=0)
-    return float(np.sqrt((pos**2).sum(axis=1).mean()))
-
-
 def main(argv=None):
     ap = ev.dev_study_parser(__doc__)
     ap.add_argument("--sigmas", default="0.5,0.8,1.1", help="edge model widths (px) to try")
@@ -56,14 +47,14 @@ def main(argv=None):
     for spec in ev.dev_study_cases(args):
         case = ev.make_case(spec)
         d = case.infinity_disparity
-        true_spread = spread(case.control_points)
+        true_spread = ev.path_spread(case.control_points)
         for s in sigmas:
             res = blind_deblur(case.blurred, infinity_disparity=d, params=base.replace(latent={"edge_sigma": s}),
                                seed=0)
             m = path_error(res.control_points, case.control_points, lightfield=case.sharp,
                            infinity_disparity=d).blur_mismatch
             mismatches[s].append(m)
-            ratio = spread(res.control_points) / true_spread if true_spread else float("nan")
+            ratio = ev.path_spread(res.control_points) / true_spread if true_spread else float("nan")
             print(f"{spec.name} | {spec.group} | {d:+g} | {spec.noise:g} | {s:g} | {m:.3f} | {ratio:.2f} | "
                   f"{res.info['blur_found']}", flush=True)
     for s in sigmas:
