@@ -6,7 +6,7 @@ import weakref
 import numpy as np
 import pytest
 import torch
-from scipy.ndimage import gaussian_filter
+from scipy.ndimage import gaussian_filter, map_coordinates
 
 from napari_lfdeblur import blind, devices
 from napari_lfdeblur.blind import (
@@ -587,6 +587,20 @@ def _two_disparity_halves(Y, X, d_left, d_right, seed, smooth=0.0, V=5, pad=12):
             right = tex[1, pad - d_right * dv : pad - d_right * dv + Y, pad - d_right * du : pad - d_right * du + X]
             lf[v, u, :, :, 0] = np.where(np.arange(X) < X // 2, left, right)
     return lf
+
+
+def test_shear_resamples_each_view_bilinearly_at_its_refocused_coordinates():
+    # reference: scipy's order-1 interpolation of each view on its own, edges replicated
+    lf = np.random.default_rng(4).random((3, 5, 9, 11, 2))
+    yy, xx = np.mgrid[0:9, 0:11].astype(np.float64)
+    for d in (0.0, 0.4, -1.3, 7.0):  # at 7 px/view the outer views read far past the edges
+        out = _disparity.shear(torch.as_tensor(lf), d).numpy()
+        for v in range(3):
+            for u in range(5):
+                for c in range(2):
+                    ref = map_coordinates(lf[v, u, :, :, c], [yy + d * (v - 1), xx + d * (u - 2)], order=1,
+                                          mode="nearest")
+                    np.testing.assert_allclose(out[v, u, :, :, c], ref, rtol=0, atol=1e-12)
 
 
 def test_disparity_map_finds_the_disparity_of_each_half():

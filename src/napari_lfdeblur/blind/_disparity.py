@@ -37,17 +37,23 @@ def shear(f: torch.Tensor, d: float) -> torch.Tensor:
     the sheared light field.
     """
     V, U, Y, X, C = f.shape
+    dt, dev = f.dtype, f.device
+    ys = torch.arange(Y, dtype=dt, device=dev)
+    shift = torch.tensor([d * (u - (U - 1) / 2.0) for u in range(U)], dtype=dt, device=dev)  # px, per view column
+    x0, x1, wx = lerp_taps(torch.arange(X, dtype=dt, device=dev)[None, :] + shift[:, None], X)  # (U, X)
+    # one lookup reads the columns of every view in a row of views: an index into the flattened (u, x) axis
+    first = (torch.arange(U, device=dev) * X)[:, None]
+    ix0, ix1 = (x0 + first).view(-1), (x1 + first).view(-1)
+    wx1 = wx.reshape(1, U * X, 1)
+    wx0 = 1 - wx1
     out = torch.empty_like(f)
-    ys = torch.arange(Y, dtype=f.dtype, device=f.device)
-    xs = torch.arange(X, dtype=f.dtype, device=f.device)
     for v in range(V):
         y0, y1, wy = lerp_taps(ys + d * (v - (V - 1) / 2.0), Y)
-        rows = (f[v].index_select(1, y0) * (1 - wy)[None, :, None, None]
-                + f[v].index_select(1, y1) * wy[None, :, None, None])
-        for u in range(U):
-            x0, x1, wx = lerp_taps(xs + d * (u - (U - 1) / 2.0), X)
-            out[v, u] = (rows[u].index_select(1, x0) * (1 - wx)[None, :, None]
-                         + rows[u].index_select(1, x1) * wx[None, :, None])
+        fv = f[v].permute(1, 0, 2, 3)  # (Y, U, X, C)
+        rows = fv.index_select(0, y0) * (1 - wy)[:, None, None, None] + fv.index_select(0, y1) * wy[:, None, None, None]
+        rows = rows.reshape(Y, U * X, C)
+        cols = rows.index_select(1, ix0) * wx0 + rows.index_select(1, ix1) * wx1
+        out[v] = cols.view(Y, U, X, C).permute(1, 0, 2, 3)
     return out
 
 
