@@ -69,6 +69,38 @@ def test_6dof_gradcheck_lightfield_and_path():
     assert torch.autograd.gradcheck(blur, (L, cp), eps=1e-6, atol=1e-5, fast_mode=True)
 
 
+@pytest.mark.parametrize("shape", [(5, 5, 40, 52, 2), (4, 7, 20, 18, 1)])
+def test_view_step_computes_the_subsampled_views_with_their_gradients(shape):
+    # the strided tiles against the whole blur, sliced: values, and the gradients for the light field
+    # (the adjoint of the strided blur) and for the path (the kernel's gradient)
+    g = torch.Generator().manual_seed(3)
+    L = torch.rand(shape, generator=g, dtype=torch.float64)
+    cp = torch.tensor(CP6, dtype=torch.float64)
+    out = {}
+    for step in (1, 2, 3):
+        Ls, cps = L.clone().requires_grad_(True), cp.clone().requires_grad_(True)
+        op = BlurOperator(shape, cps, n_times=7, infinity_disparity=0.4, dtype=torch.float64, device="cpu")
+        assert op.kind == "tiled"
+        full = op.forward(Ls)
+        sub = op.forward(Ls, view_step=step)
+        np.testing.assert_array_equal(sub.detach().numpy(), full.detach()[::step, ::step].numpy())
+        w = torch.rand(sub.shape, generator=torch.Generator().manual_seed(step), dtype=torch.float64)
+        gl_sub, gc_sub = torch.autograd.grad((sub * w).sum(), (Ls, cps), retain_graph=True)
+        gl_ref, gc_ref = torch.autograd.grad((full[::step, ::step] * w).sum(), (Ls, cps))
+        np.testing.assert_allclose(gl_sub.numpy(), gl_ref.numpy(), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(gc_sub.numpy(), gc_ref.numpy(), rtol=1e-10, atol=1e-12)
+        out[step] = sub.shape
+    V, U = shape[:2]
+    assert out[2][:2] == (len(range(0, V, 2)), len(range(0, U, 2)))
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2"])
+def test_view_step_must_be_a_positive_integer(bad):
+    op = BlurOperator((3, 3, 8, 8, 1), CP6, n_times=4, device="cpu")
+    with pytest.raises(ValueError, match="view_step"):
+        op.forward(torch.zeros(op.shape), view_step=bad)
+
+
 @pytest.mark.parametrize("views", [(3, 4), (1, 3)])
 def test_tiled_kernel_gradient_matches_finite_differences(views):
     """The analytic gradient of the per-tile kernels in their four shifts, over several tiles, with shifts

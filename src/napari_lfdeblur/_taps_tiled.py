@@ -19,6 +19,7 @@ the taps reproduces the model's clamped-coordinate bilinear lookup exactly.
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 
@@ -289,56 +290,71 @@ class _Tile:
         Tb = T.index_select(2, self.iy).index_select(3, self.ix)[self.iv[:, None], self.iu[None, :]]
         return Tb.permute(0, 1, 4, 2, 3).contiguous()
 
-    def window(self, t, tap, V, U):
-        a, b, c, e = tap
-        return t[a : a + V, c : c + U, :, b : b + self.h, e : e + self.w]
-
 
 class TiledTaps:
     """Tile-wise application of :func:`tiled_kernel`'s kernels, their adjoint and kernel gradient.
 
     Used through :class:`~napari_lfdeblur._taps.TapBlur` (no autograd inside).
+    With ``view_step = s > 1`` the output holds only the views ``0, s, 2s,
+    ...`` along ``v`` and ``u``, ``(ceil(V/s), ceil(U/s), Y, X, C)``, and only
+    those are computed; the adjoint takes that shape back to the whole light
+    field.
     """
 
-    def __init__(self, shape, K, layout):
+    def __init__(self, shape, K, layout, view_step: int = 1):
         self.shape = shape
         self.K = K.detach()
         self.tiles = [_Tile(shape, *entry) for entry in layout]
+        self.view_step = view_step
+
+    def with_view_step(self, view_step: int) -> "TiledTaps":
+        """The same kernels and tiles, with output views ``0, view_step, ...`` only."""
+        out = copy.copy(self)
+        out.view_step = view_step
+        return out
 
     @property
     def n_taps(self) -> float:
         """Mean number of taps per tile: passes over the light field one forward costs."""
         return sum(len(t.taps) for t in self.tiles) / len(self.tiles)
 
-    def forward(self, L):
+    def _window(self, tile, t, tap):
+        """The part of ``t`` (padded as ``(V', U', C, h', w')``) that tap ``tap`` reads for the output views."""
         V, U = self.shape[:2]
-        out = torch.empty_like(L)
+        a, b, c, e = tap
+        s = self.view_step
+        return t[a : a + V : s, c : c + U : s, :, b : b + tile.h, e : e + tile.w]
+
+    def forward(self, L):
+        V, U, Y, X, C = self.shape
+        s = self.view_step
+        out = L.new_empty((len(range(0, V, s)), len(range(0, U, s)), Y, X, C))
         for tile in self.tiles:
             Lp = tile.padded(L)
             Kt = tile.kernel(self.K)
-            acc = Lp.new_zeros((V, U, Lp.shape[2], tile.h, tile.w))
-            for s, tap in enumerate(tile.taps):
-                acc.addcmul_(tile.window(Lp, tap, V, U), Kt[s])
+            acc = Lp.new_zeros((out.shape[0], out.shape[1], C, tile.h, tile.w))
+            for k, tap in enumerate(tile.taps):
+                acc.addcmul_(self._window(tile, Lp, tap), Kt[k])
             out[:, :, tile.rows, tile.cols] = acc.permute(0, 1, 3, 4, 2)
         return out
 
     def backward(self, L, G, need_L=True, need_K=False):
         """``(adjoint(G), d<G, forward(L)>/dK)``, each None when not needed."""
         V, U, _, _, C = self.shape
-        gL = torch.zeros_like(G) if need_L else None
+        gL = G.new_zeros(self.shape) if need_L else None
         gK = torch.zeros_like(self.K) if need_K else None
         for tile in self.tiles:
             Gb = G[:, :, tile.rows, tile.cols].permute(0, 1, 4, 2, 3).contiguous()
             if need_K:
                 Lp = tile.padded(L)
                 gKt = tile.kernel(gK)
-                for s, tap in enumerate(tile.taps):
-                    gKt[s] = (Gb * tile.window(Lp, tap, V, U)).sum(dim=(0, 1, 2))
+                for k, tap in enumerate(tile.taps):
+                    gKt[k] = (Gb * self._window(tile, Lp, tap)).sum(dim=(0, 1, 2))
             if need_L:
                 Kt = tile.kernel(self.K)
                 gp = Gb.new_zeros((len(tile.iv), len(tile.iu), C, len(tile.iy), len(tile.ix)))
-                for s, tap in enumerate(tile.taps):
-                    tile.window(gp, tap, V, U).addcmul_(Gb, Kt[s])
+                for k, tap in enumerate(tile.taps):
+                    self._window(tile, gp, tap).addcmul_(Gb, Kt[k])
                 # adjoint of the padding: v and u (few views) by slices, y and x at the edges
                 g = fold(fold(gp, 0, tile.iv_list, V), 1, tile.iu_list, U)
                 g = _fold_clamped(_fold_clamped(g, 3, tile.pad_rows), 4, tile.pad_cols)

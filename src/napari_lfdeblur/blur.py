@@ -336,10 +336,21 @@ class BlurOperator:
             raise ValueError(f"expected a tensor of shape {self.shape}; got {tuple(t.shape)}")
         return t
 
-    def forward(self, lf: torch.Tensor) -> torch.Tensor:
-        """Blur ``lf`` (shape ``(V, U, Y, X, C)``); differentiable in ``lf`` and the path."""
+    def forward(self, lf: torch.Tensor, view_step: int = 1) -> torch.Tensor:
+        """Blur ``lf`` (shape ``(V, U, Y, X, C)``); differentiable in ``lf`` and the path.
+
+        ``view_step = s > 1`` returns only the views ``0, s, 2s, ...`` along
+        ``v`` and ``u``, shape ``(ceil(V/s), ceil(U/s), Y, X, C)``: a path fit
+        on a subsample of the views. With a rotation only those views are
+        computed; otherwise the whole blur is computed and sliced.
+        """
         L = self._check(lf)
-        return TapBlur.apply(L, self._kernel[0], self._taps())
+        if isinstance(view_step, bool) or not isinstance(view_step, int) or view_step < 1:
+            raise ValueError(f"view_step must be a positive integer; got {view_step!r}")
+        if view_step > 1 and self.kind == "tiled":
+            return TapBlur.apply(L, self._kernel[0], self._tiles.with_view_step(view_step))
+        out = TapBlur.apply(L, self._kernel[0], self._taps())
+        return out if view_step == 1 else out[::view_step, ::view_step]
 
     __call__ = forward
 

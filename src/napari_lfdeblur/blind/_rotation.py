@@ -7,7 +7,8 @@ salient-edge latent under the current 6-DOF path
 (:func:`~napari_lfdeblur.blind._latent.l0_latent`), then Adam on the path's
 control points against that latent, in the gradient domain,
 ``min_p ||grad_yx(K_p G_sigma l) - grad_yx f||^2``, through the exact
-6-DOF operator. The rotation acts on the whole frame's coordinates
+6-DOF operator, on every other view along ``v`` and ``u``
+(:data:`FIT_VIEW_STEP`). The rotation acts on the whole frame's coordinates
 (docs/model.md, "Camera rotation"), so on a window the operator is told
 the window's place in the frame.
 
@@ -32,10 +33,14 @@ from ._adam import Adam
 from ._alternating import relay
 from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
 from ._evidence import evidence_weight, path_disagreement
-from ._latent import EdgeBlurred, edge_sigmas, l0_latent, n_hqs_steps
+from ._latent import EdgeBlurred, edge_sigmas, gauss_yx, l0_latent, n_hqs_steps
 from ._params import BlindParams, PathEstimate
 
-__all__ = ["iter_rotation_fit", "dominant_disparity", "rotation_equivalent"]
+__all__ = ["iter_rotation_fit", "dominant_disparity", "rotation_equivalent", "FIT_VIEW_STEP"]
+
+#: The path fit compares the views ``0, 2, 4, ...`` along ``v`` and ``u`` (where there are at least 5):
+#: a third of the work, and the whole aperture, whose parallax tells rotation from translation.
+FIT_VIEW_STEP = 2
 
 
 def iter_rotation_fit(g: torch.Tensor, est: PathEstimate, p: BlindParams, device, window, frame_shape, box: float):
@@ -174,10 +179,12 @@ class _Fit:
     """
 
     def __init__(self, g, latent, sigma, frame, rp, r_px, box, cp, device):
-        self.g, self.latent, self.sigma, self.frame, self.rp, self.box = g, latent, sigma, frame, rp, box
+        self.g, self.frame, self.rp, self.box = g, frame, rp, box
+        self.source = gauss_yx(latent, sigma)  # what the path blurs: the latent with the scene's edge softness
         self.device = device
         self.scale = torch.tensor([1.0, 1.0, 1.0] + [1.0 / r_px] * 3, dtype=torch.float32, device=device)
-        self.gy, self.gx = gradient_yx(g)
+        self.view_step = FIT_VIEW_STEP if min(g.shape[:2]) >= 5 else 1
+        self.gy, self.gx = gradient_yx(g[:: self.view_step, :: self.view_step].contiguous())
         mean_row = bernstein_matrix(len(cp), rp.n_times).mean(axis=0)
         self.mean_row = torch.as_tensor(mean_row, dtype=torch.float32, device=device)
         self.q = (torch.as_tensor(cp, dtype=torch.float32, device=device) / self.scale).requires_grad_(True)
@@ -191,7 +198,7 @@ class _Fit:
         with torch.enable_grad():
             cp = self.q * self.scale
             op = BlurOperator(tuple(self.g.shape), cp, n_times=self.rp.n_times, frame=self.frame, device=self.device)
-            gy, gx = gradient_yx(EdgeBlurred(op, self.sigma).forward(self.latent))
+            gy, gx = gradient_yx(op.forward(self.source, self.view_step))
             loss = ((gy - self.gy).square().mean() + (gx - self.gx).square().mean()) / 2
             loss.backward()
         self.opt.step()
