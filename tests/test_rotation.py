@@ -94,6 +94,14 @@ def test_view_step_computes_the_subsampled_views_with_their_gradients(shape):
     assert out[2][:2] == (len(range(0, V, 2)), len(range(0, U, 2)))
 
 
+def test_view_step_without_rotation_slices_the_whole_blur():
+    x = torch.rand(5, 4, 12, 10, 1, generator=torch.Generator().manual_seed(5))
+    for d_inf in (0.0, 0.5):
+        op = BlurOperator(x.shape, CP6[:, :3], n_times=6, infinity_disparity=d_inf, device="cpu")
+        assert op.kind != "tiled"
+        np.testing.assert_array_equal(op.forward(x, view_step=np.int64(2)).numpy(), op.forward(x)[::2, ::2].numpy())
+
+
 @pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2"])
 def test_view_step_must_be_a_positive_integer(bad):
     op = BlurOperator((3, 3, 8, 8, 1), CP6, n_times=4, device="cpu")

@@ -295,17 +295,17 @@ class TiledTaps:
     """Tile-wise application of :func:`tiled_kernel`'s kernels, their adjoint and kernel gradient.
 
     Used through :class:`~napari_lfdeblur._taps.TapBlur` (no autograd inside).
-    With ``view_step = s > 1`` the output holds only the views ``0, s, 2s,
-    ...`` along ``v`` and ``u``, ``(ceil(V/s), ceil(U/s), Y, X, C)``, and only
-    those are computed; the adjoint takes that shape back to the whole light
-    field.
+    A copy made by :meth:`with_view_step` ``(s)`` outputs only the views
+    ``0, s, 2s, ...`` along ``v`` and ``u``, ``(ceil(V/s), ceil(U/s), Y, X,
+    C)``, and computes only those; its adjoint takes that shape back to the
+    whole light field.
     """
 
-    def __init__(self, shape, K, layout, view_step: int = 1):
+    def __init__(self, shape, K, layout):
         self.shape = shape
         self.K = K.detach()
         self.tiles = [_Tile(shape, *entry) for entry in layout]
-        self.view_step = view_step
+        self.view_step = 1
 
     def with_view_step(self, view_step: int) -> "TiledTaps":
         """The same kernels and tiles, with output views ``0, view_step, ...`` only."""

@@ -345,12 +345,13 @@ class BlurOperator:
         computed; otherwise the whole blur is computed and sliced.
         """
         L = self._check(lf)
-        if isinstance(view_step, bool) or not isinstance(view_step, int) or view_step < 1:
+        if isinstance(view_step, bool) or not isinstance(view_step, (int, np.integer)) or view_step < 1:
             raise ValueError(f"view_step must be a positive integer; got {view_step!r}")
-        if view_step > 1 and self.kind == "tiled":
-            return TapBlur.apply(L, self._kernel[0], self._tiles.with_view_step(view_step))
+        s = int(view_step)
+        if s > 1 and self.kind == "tiled":
+            return TapBlur.apply(L, self._kernel[0], self._tiles.with_view_step(s))
         out = TapBlur.apply(L, self._kernel[0], self._taps())
-        return out if view_step == 1 else out[::view_step, ::view_step]
+        return out if s == 1 else out[::s, ::s]
 
     __call__ = forward
 
