@@ -102,11 +102,30 @@ def test_view_step_without_rotation_slices_the_whole_blur():
         np.testing.assert_array_equal(op.forward(x, view_step=np.int64(2)).numpy(), op.forward(x)[::2, ::2].numpy())
 
 
+@pytest.mark.parametrize("cp, d_inf", [(CP6[:, :3], 0.0), (CP6[:, :3], 0.5), (CP6, 0.0), (CP6, -0.7)])
+@pytest.mark.parametrize("step", [2, 3])
+def test_view_step_forward_and_adjoint_are_adjoint(cp, d_inf, step):
+    op = BlurOperator((5, 4, 20, 18, 2), cp, n_times=6, infinity_disparity=d_inf, dtype=torch.float64, device="cpu")
+    g = torch.Generator().manual_seed(step)
+    x = torch.rand(op.shape, generator=g, dtype=torch.float64)
+    fx = op.forward(x, view_step=step)
+    assert fx.shape[:2] == (len(range(0, 5, step)), len(range(0, 4, step)))
+    y = torch.rand(fx.shape, generator=g, dtype=torch.float64)
+    aty = op.adjoint(y, view_step=step)
+    assert aty.shape == op.shape
+    lhs, rhs = float((fx * y).sum()), float((x * aty).sum())
+    assert abs(lhs - rhs) <= 1e-12 * abs(lhs)
+    with pytest.raises(ValueError, match="shape"):
+        op.adjoint(torch.zeros(op.shape, dtype=torch.float64), view_step=step)
+
+
 @pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2"])
 def test_view_step_must_be_a_positive_integer(bad):
     op = BlurOperator((3, 3, 8, 8, 1), CP6, n_times=4, device="cpu")
     with pytest.raises(ValueError, match="view_step"):
         op.forward(torch.zeros(op.shape), view_step=bad)
+    with pytest.raises(ValueError, match="view_step"):
+        op.adjoint(torch.zeros(op.shape), view_step=bad)
 
 
 @pytest.mark.parametrize("views", [(3, 4), (1, 3)])

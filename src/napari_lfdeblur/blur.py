@@ -227,6 +227,13 @@ def interpolation_matrices(positions: torch.Tensor, shape):
 # -------------------------------------------------------------- operator
 
 
+def _check_view_step(view_step) -> int:
+    """``view_step`` as an int, or a ValueError when it is not a positive integer."""
+    if isinstance(view_step, bool) or not isinstance(view_step, (int, np.integer)) or view_step < 1:
+        raise ValueError(f"view_step must be a positive integer; got {view_step!r}")
+    return int(view_step)
+
+
 class BlurOperator:
     """The motion-blur operator of one camera path on light fields of one shape.
 
@@ -329,11 +336,13 @@ class BlurOperator:
             t_x = t_x + d * self.s_u[:, None, :]
         return tiled_kernel(self.s_v, self.s_u, t_y, t_x, self.shape, tile_side(self.shape, self.block_elements))
 
-    def _check(self, t: torch.Tensor) -> torch.Tensor:
+    def _check(self, t: torch.Tensor, shape=None) -> torch.Tensor:
+        """``t``, checked to be a torch tensor of ``shape`` (default: the operator's)."""
+        shape = self.shape if shape is None else shape
         if not isinstance(t, torch.Tensor):
             raise TypeError("BlurOperator works on torch tensors; use simulate_blur for numpy arrays")
-        if tuple(t.shape) != self.shape:
-            raise ValueError(f"expected a tensor of shape {self.shape}; got {tuple(t.shape)}")
+        if tuple(t.shape) != shape:
+            raise ValueError(f"expected a tensor of shape {shape}; got {tuple(t.shape)}")
         return t
 
     def forward(self, lf: torch.Tensor, view_step: int = 1) -> torch.Tensor:
@@ -345,9 +354,7 @@ class BlurOperator:
         computed; otherwise the whole blur is computed and sliced.
         """
         L = self._check(lf)
-        if isinstance(view_step, bool) or not isinstance(view_step, (int, np.integer)) or view_step < 1:
-            raise ValueError(f"view_step must be a positive integer; got {view_step!r}")
-        s = int(view_step)
+        s = _check_view_step(view_step)
         if s > 1 and self.kind == "tiled":
             return TapBlur.apply(L, self._kernel[0], self._tiles.with_view_step(s))
         out = TapBlur.apply(L, self._kernel[0], self._taps())
@@ -355,10 +362,23 @@ class BlurOperator:
 
     __call__ = forward
 
-    def adjoint(self, y: torch.Tensor) -> torch.Tensor:
-        """The adjoint (transpose) of :meth:`forward` in the light field, for a fixed path."""
-        G = self._check(y).detach().contiguous()
-        return self._taps().adjoint(G)
+    def adjoint(self, y: torch.Tensor, view_step: int = 1) -> torch.Tensor:
+        """The adjoint (transpose) of :meth:`forward` in the light field, for a fixed path.
+
+        With ``view_step = s > 1``, ``y`` holds the views ``0, s, 2s, ...``
+        (the shape :meth:`forward` returns for that step) and the result is
+        the whole light field's shape.
+        """
+        s = _check_view_step(view_step)
+        V, U = self.shape[:2]
+        G = self._check(y, (len(range(0, V, s)), len(range(0, U, s))) + self.shape[2:]).detach().contiguous()
+        if s == 1:
+            return self._taps().adjoint(G)
+        if self.kind == "tiled":
+            return self._tiles.with_view_step(s).adjoint(G)
+        full = G.new_zeros(self.shape)  # the adjoint of keeping every s-th view: zeros at the others
+        full[::s, ::s] = G
+        return self._taps().adjoint(full)
 
     def _taps(self):
         """The object that applies the kernel (:class:`Taps`, :class:`Taps4D` or :class:`TiledTaps`)."""
