@@ -25,8 +25,11 @@ pytestmark = [pytest.mark.filterwarnings("ignore::napari_lfdeblur.io.ViewOrderWa
 from napari_lfdeblur import read_lightfield, write_lightfield  # noqa: E402
 from napari_lfdeblur.batch import read_manifest, simulate_item  # noqa: E402
 
-N_PER_INPUT = 16  # enough work left after the first item that the interrupt lands mid-run
-N_TIMES = 1024  # slow items (about 0.3 s each), so that the run is surely interrupted mid-way
+# The interrupt must land while items are left: after the first record, the other 2 * N_PER_INPUT - 1 items
+# take a few seconds on two workers (each item computes for about 15 ms and costs the cluster a few tens of ms
+# more), far more than the test takes to see the record and send the signal.
+N_PER_INPUT = 64
+N_TIMES = 4096
 OPTIONS = ["--n-per-input", str(N_PER_INPUT), "--path-kind", "shake", "--extent", "1.5", "--noise", "0.01",
            "--n-times", str(N_TIMES), "--device", "cpu", "--seed", "7"]
 
