@@ -212,6 +212,34 @@ def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
     assert main(argv) == 0 and "1 already done" in capsys.readouterr().out
 
 
+def test_value_range_reads_the_inputs_and_is_part_of_the_items_parameters(client, tmp_path, capsys):
+    rng = np.random.default_rng(4)
+    lf = rng.random((3, 3, 8, 8)).astype(np.float32)
+    (tmp_path / "in").mkdir()
+    np.save(tmp_path / "in" / "raw.npy", lf * 4095.0)  # floats on a 12-bit scale: unreadable without a range
+    report = simulate_dataset(tmp_path / "in" / "raw.npy", tmp_path / "plain", path_kind="linear", client=client,
+                              device="cpu")
+    assert report.n_failed == 1 and "--value-range" in report.records[0]["error"]
+    report = simulate_dataset(tmp_path / "in" / "raw.npy", tmp_path / "sim", path_kind="linear",
+                              value_range=(0, 4095), client=client, device="cpu")
+    assert report.n_ok == 1 and report.records[0]["parameters"]["value_range"] == [0.0, 4095.0]
+    cp = load_path_json(tmp_path / "sim" / "raw_0000.path.json")
+    want = _serial(lambda: simulate_blur(read_lightfield(tmp_path / "in" / "raw.npy", value_range=(0, 4095)), cp))
+    assert np.array_equal(read_lightfield(tmp_path / "sim" / "raw_0000.npz"), want)
+    with pytest.raises(ValueError, match="lo < hi"):
+        deblur_many(tmp_path / "in" / "raw.npy", tmp_path / "bad", value_range=(1, 0), client=client)
+    argv = ["batch", "deblur", str(tmp_path / "in" / "raw.npy"), str(tmp_path / "out"), "--value-range", "auto",
+            "--scheduler", client.scheduler.address, "--device", "cpu", "--params", str(tmp_path / "tiny.json")]
+    (tmp_path / "tiny.json").write_text(TINY.to_json())
+    assert main(argv) == 0
+    rec = read_manifest(tmp_path / "out")["raw.npz"]
+    assert rec["status"] == "ok" and rec["parameters"]["value_range"] == "auto"
+    assert "--value-range=auto" in (tmp_path / "out" / "README.md").read_text()
+    want = _serial(lambda: blind_deblur(read_lightfield(tmp_path / "in" / "raw.npy", value_range="auto"),
+                                        params=TINY, seed=item_seed(0, "raw.npy", 0), device="cpu"))
+    assert np.array_equal(read_lightfield(tmp_path / "out" / "raw.npz"), want.lightfield)
+
+
 def test_batch_summary_counts_inputs_returned_unchanged_and_restored_lightly():
     recs = [{"status": "ok", "blur_found": False, "restoration": r} for r in ("none", "light", "light")]
     recs += [{"status": "ok", "blur_found": True, "restoration": "full"}, {"status": "failed"}]

@@ -143,6 +143,23 @@ def test_clear_blur_is_found_with_its_evidence(linear_result):
     assert ev["reach"] > 1.0 and "rejected_path" not in info
 
 
+def test_a_dark_input_shows_little_blur_and_the_message_says_it_is_dark(linear_case, linear_result):
+    # the same blurred scene at a tenth of its brightness: the salient edges are on an absolute scale
+    _, _, blurred = linear_case
+    dark = blurred * np.float32(0.1)
+    res = blind_deblur(dark, params=BlindParams().replace(n_control_points=2, **FAST), device="cpu")
+    assert linear_result.info["restoration"] == "full" and "dark" not in linear_result.info["message"]
+    assert res.info["restoration"] == "none" and res.info["message"].startswith("little blur found")
+    brightest = float(np.percentile(dark[3, 3], 99.9))
+    assert res.info["brightest"] == pytest.approx(brightest, rel=1e-6) and brightest < 0.1
+    assert f"The light field is dark (99.9 % of its centre view is below {brightest:.3g})" in res.info["message"]
+    assert "value_range='auto'" in res.info["message"]
+    ev = {"blur_found": False, "gain": 0.0, "relative": 0.0, "reach": 0.0}
+    assert "dark" not in _evidence.evidence_message(ev, brightest=0.25)  # the threshold, DARK_LEVEL, excluded
+    assert "dark" in _evidence.evidence_message(ev, brightest=0.249)
+    assert "dark" not in _evidence.evidence_message({**ev, "blur_found": True}, brightest=0.1)
+
+
 @pytest.mark.parametrize("gain_ok, relative_ok, reach_ok", [(False, True, True), (True, False, True),
                                                             (True, True, False), (False, False, False)])
 def test_evidence_message_names_every_unmet_condition(gain_ok, relative_ok, reach_ok):

@@ -802,6 +802,62 @@ def test_bad_angular_crop_is_refused_before_reading(tmp_path, lf_gray, crop):
         read_lightfield(tmp_path / "a.npy", angular_crop=crop)
 
 
+@pytest.mark.parametrize("text, expected", [("", None), (None, None), ("auto", "auto"), (" AUTO ", "auto"),
+                                            ("0,4095", (0.0, 4095.0)), (" -1.5 , 2e3 ", (-1.5, 2000.0))])
+def test_parse_value_range(text, expected):
+    from napari_lfdeblur.io import parse_value_range
+
+    assert parse_value_range(text) == expected
+
+
+@pytest.mark.parametrize("text", ["5,1", "3,3", "a,b", "1", "1,2,3", "nan,1", "0,inf", "max"])
+def test_parse_value_range_refuses_with_an_example(text):
+    from napari_lfdeblur.io import parse_value_range
+
+    with pytest.raises(ValueError, match="expected LO,HI with LO < HI, such as 0,4095, or auto"):
+        parse_value_range(text)
+
+
+@pytest.mark.parametrize("value_range", [(5, 1), (0, float("nan")), (0, 1, 2), "max", 3])
+def test_bad_value_range_is_refused_before_reading(tmp_path, value_range):
+    with pytest.raises(ValueError, match="value_range"):
+        read_lightfield(tmp_path / "missing.npy", value_range=value_range)  # refused before the file is looked for
+
+
+def test_twelve_bit_values_in_a_sixteen_bit_file(tmp_path, lf_gray):
+    raw = np.round(lf_gray * 4095).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "raw.tif", raw)
+    np.testing.assert_allclose(read_lightfield(tmp_path / "raw.tif"), raw / 65535, atol=1e-7)  # dark by default
+    lf, meta = read_lightfield_with_metadata(tmp_path / "raw.tif", value_range=(0, 4095))
+    np.testing.assert_allclose(lf, raw / 4095, atol=1e-6)
+    assert meta["value_range"] == [0.0, 4095.0]
+    lf, meta = read_lightfield_with_metadata(tmp_path / "raw.tif", value_range="auto")
+    np.testing.assert_allclose(lf, (raw - raw.min()) / (raw.max() - raw.min()), atol=1e-6)
+    assert meta["value_range"] == "auto"
+
+
+def test_cli_value_range_and_the_dark_note(tmp_path, lf_rgb, capsys):
+    from napari_lfdeblur.cli import main
+
+    np.save(tmp_path / "scaled.npy", lf_rgb * 255)
+    assert main(["info", str(tmp_path / "scaled.npy")]) == 2
+    err = capsys.readouterr().err
+    assert "--value-range LO,HI" in err and len(err.strip().splitlines()) == 1
+    assert main(["simulate", str(tmp_path / "scaled.npy"), str(tmp_path / "b.npy"), "--value-range", "0,255",
+                 "--path", "linear:0", "--n-times", "2"]) == 0  # no motion: the input, rescaled
+    np.testing.assert_allclose(np.load(tmp_path / "b.npy"), lf_rgb, atol=1e-5)
+    with pytest.raises(SystemExit):
+        main(["info", str(tmp_path / "scaled.npy"), "--value-range", "255,0"])
+    assert "expected LO,HI with LO < HI" in capsys.readouterr().err
+    np.save(tmp_path / "dim.npy", lf_rgb * 0.2)
+    assert main(["info", str(tmp_path / "dim.npy")]) == 0
+    bright = np.percentile((lf_rgb * 0.2)[lf_rgb.shape[0] // 2, lf_rgb.shape[1] // 2], 99.9)
+    assert f"dark: 99.9 % of the centre view is below {bright:.3g} (" in capsys.readouterr().out
+    assert main(["info", str(tmp_path / "dim.npy"), "--value-range", "auto"]) == 0
+    out = capsys.readouterr().out
+    assert "dark" not in out and "value range: [0, 1]" in out
+
+
 def test_cli_angular_crop(tmp_path, lf_rgb, capsys):
     from napari_lfdeblur.cli import main
 

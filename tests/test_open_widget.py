@@ -110,3 +110,22 @@ def test_a_file_that_is_not_a_light_field(make_napari_viewer, qtbot, tmp_path, n
     assert len(viewer.layers) == 0
     ((kind, message),) = notifications
     assert kind == "error" and "notes.npy" in message
+
+
+def test_value_range_rescales_and_a_bad_one_is_a_notification(make_napari_viewer, qtbot, tmp_path, lf,
+                                                               notifications):
+    path = tmp_path / "raw.npy"
+    np.save(path, lf * 4095.0)  # floats on a 12-bit scale: refused without a value range
+    viewer, w = _widget(make_napari_viewer)
+    w.source.value = path
+    assert w.open_and_wait() is None
+    assert notifications[-1][0] == "error" and "value range" in notifications[-1][1]
+    w.value_range.value = "5,1"
+    assert w.open() is None  # refused in the form, before any read
+    assert notifications[-1] == ("error", "Open a light field: value range '5,1': expected LO,HI with LO < HI, "
+                                 "such as 0,4095, or auto")
+    assert len(viewer.layers) == 0
+    w.value_range.value = "0,4095"
+    layer = w.open_and_wait()
+    np.testing.assert_allclose(layer.data, lf, atol=1e-6)
+    assert layer.metadata["value_range"] == [0.0, 4095.0]

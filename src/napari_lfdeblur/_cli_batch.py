@@ -11,6 +11,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from ._cli_types import value_range
+
 __all__ = ["add_batch", "run_batch", "weak_blur_summary"]
 
 
@@ -27,6 +29,9 @@ def _common(p) -> None:
                    help="cuda: run on workers with the resource GPU=1; auto: on them if any (default auto)")
     p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
     p.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
+    p.add_argument("--value-range", type=value_range, default=None, metavar="LO,HI",
+                   help="the stored values that become 0 and 1 when the inputs are read, such as 0,4095 for "
+                   "12-bit data in a 16-bit file, or auto (each input's own minimum and maximum)")
     p.add_argument("--overwrite", action="store_true", help="recompute every item and replace its output")
 
 
@@ -81,6 +86,8 @@ def _command(args) -> str:
     else:
         words += ["--params", args.params] if args.params else ["--preset", args.preset]
     words += ["--infinity-disparity", args.infinity_disparity, "--seed", args.seed]
+    if args.value_range is not None:
+        words.append("--value-range=" + ("auto" if args.value_range == "auto" else "%r,%r" % args.value_range))
     return " ".join(shlex.quote(str(w)) for w in words)
 
 
@@ -149,8 +156,8 @@ def _run(args) -> int:
 
         try:
             report = run(args.inputs, args.out_dir, infinity_disparity=args.infinity_disparity, seed=args.seed,
-                         client=client, device=args.device, overwrite=args.overwrite, callback=show,
-                         command=command, **options)
+                         value_range=args.value_range, client=client, device=args.device, overwrite=args.overwrite,
+                         callback=show, command=command, **options)
         finally:
             bar.close()
     done = f"{report.n_ok} done, {report.n_skipped} already done (skipped)" + weak_blur_summary(report.records)

@@ -9,12 +9,13 @@ exit status 2, never as a traceback.
 from __future__ import annotations
 
 import argparse
-import math
 import shlex
 import sys
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
+from ._cli_types import angular_crop, fraction, gib, value_range
+from ._lightfield import DARK_LEVEL, brightest
 
 __all__ = ["main"]
 
@@ -32,47 +33,18 @@ def _progress(iterable=None, **kwargs):
     return tqdm(iterable, **kwargs)
 
 
-def _angular_crop(text: str):
-    """``--angular-crop``: ``N`` or ``NV,NU``."""
-    try:
-        sizes = tuple(int(n) for n in text.replace("x", ",").split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected N or NV,NU such as 9 or 9,9") from None
-    if len(sizes) not in (1, 2):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected N or NV,NU such as 9 or 9,9")
-    return sizes[0] if len(sizes) == 1 else sizes
-
-
-def _fraction(text: str) -> float:
-    """A number in [0, 1] (``--light-restoration``)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a number in [0, 1], such as 0.5") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a number in [0, 1], such as 0.5")
-    return value
-
-
-def _gib(text: str) -> int:
-    """A positive number of GiB, as bytes (``--max-memory``)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number of GiB, such as 4 or 1.5")
-    return int(value * 2**30)
-
-
 def _input_argument(p, help_text="light field file or folder"):
-    """The INPUT positional, ``--swap-views`` and ``--angular-crop``, shared by the commands that read a light field."""
+    """INPUT, ``--swap-views``, ``--angular-crop`` and ``--value-range``: the commands that read a light field."""
     p.add_argument("input", help=help_text)
     p.add_argument("--swap-views", action="store_true",
                    help="swap the two view axes after reading (for exports that name the horizontal view first)")
-    p.add_argument("--angular-crop", type=_angular_crop, default=None, metavar="N",
+    p.add_argument("--angular-crop", type=angular_crop, default=None, metavar="N",
                    help="keep only the central N x N views (or NV,NU): a Lytro decode's outer views are dark, and "
                    "folders, HDF5, MATLAB v7.3 and .npy files then read only the views kept")
+    p.add_argument("--value-range", type=value_range, default=None, metavar="LO,HI",
+                   help="the stored values that become 0 and 1, such as 0,4095 for 12-bit data in a 16-bit file, "
+                   "or auto (the data's own minimum and maximum); default: integers by their type's maximum, "
+                   "floats as they are (they must lie in [0, 1])")
 
 
 def _read(args, **options):
@@ -91,6 +63,8 @@ def _read(args, **options):
         raise CLIError(f"input {args.input} does not exist")
     if args.angular_crop is not None:
         options["angular_crop"] = args.angular_crop
+    if args.value_range is not None:
+        options["value_range"] = args.value_range
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ViewOrderWarning)
         lf, meta = read_lightfield_with_metadata(args.input, **options)
@@ -210,7 +184,7 @@ def _add_deblur(sub):
                         "farthest content (sky, a far wall); the blind solver cannot estimate it (see "
                         "docs/blind.md)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--max-memory", type=_gib, default=None, metavar="GIB",
+    p.add_argument("--max-memory", type=gib, default=None, metavar="GIB",
                    help="memory the run may use on its device, in GiB (default: what it has free); with less "
                         "than it needs, the light field is restored in tiles")
     p.add_argument("--motion", choices=["3dof", "6dof"], default=None,
@@ -224,7 +198,7 @@ def _add_deblur(sub):
     p.add_argument("--restore-anyway", action="store_true",
                    help="restore with the estimated path even when the data give little evidence of blur "
                         "(BlindParams.require_evidence=False; default: return the input unchanged then)")
-    p.add_argument("--light-restoration", type=_fraction, metavar="FRACTION",
+    p.add_argument("--light-restoration", type=fraction, metavar="FRACTION",
                    help="when the data give little evidence of blur but two parts of them agree on the path, "
                         "restore with the estimated path scaled by FRACTION (in [0, 1]) instead of returning "
                         "the input: a light restoration (BlindParams.light_restoration; default: the preset's, "
@@ -376,6 +350,11 @@ def _run_info(args):
     print(f"shape:       {lf.shape}  (V, U, Y, X{', C' if lf.ndim == 5 else ''})")
     print(f"dtype:       {lf.dtype} (stored as {meta.get('file_dtype', '?')})")
     print(f"value range: [{float(lf.min()):.6g}, {float(lf.max()):.6g}], mean {float(lf.mean()):.6g}")
+    bright = brightest(lf)
+    if bright < DARK_LEVEL and args.value_range is None:
+        print(f"note:        dark: 99.9 % of the centre view is below {bright:.3g} (10- or 12-bit data in a 16-bit "
+              "file? a linear decode?); the blind solver finds few edges in dark data: --value-range auto or "
+              "LO,HI stretches it")
     rest = {k: v for k, v in meta.items() if k not in ("source", "layout", "shape", "dtype", "file_dtype")}
     print("metadata:" + ("" if rest else "    (none)"))
     for key, value in rest.items():

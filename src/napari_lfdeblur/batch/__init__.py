@@ -28,7 +28,11 @@ from ._run import BatchReport, connect, expand_inputs, make_spec, run_batch
 __all__ = ["simulate_dataset", "deblur_many", "simulate_item", "item_seed", "draw_path", "read_manifest",
            "connect", "BatchReport", "PATH_KINDS"]
 
-_COMMON_DOC = """client : distributed.Client, str or None
+_COMMON_DOC = """value_range : (float, float) or 'auto', optional
+        How the inputs are read (:func:`~napari_lfdeblur.io.read_lightfield`):
+        the stored values that become 0 and 1, for data stored on another
+        scale; recorded in each item's parameters.
+    client : distributed.Client, str or None
         ``None`` starts an embedded ``LocalCluster`` (single-threaded worker
         processes, one per core, or ``workers``); a string is a scheduler
         address such as ``'tcp://host:8786'``.
@@ -56,6 +60,16 @@ def _version() -> str:
     return __version__
 
 
+def _reading(value_range) -> dict:
+    """The reading option of the items' parameters: ``{'value_range': ...}``, or nothing when it is None."""
+    from ..io._common import check_value_range
+
+    value_range = check_value_range(value_range)
+    if value_range is None:
+        return {}
+    return {"value_range": value_range if value_range == "auto" else list(value_range)}
+
+
 def _stem(path: Path) -> str:
     """The output name of an input: a file's name without its last suffix, a folder's name."""
     return path.stem if path.is_file() else path.name
@@ -70,14 +84,14 @@ def _call_text(func: str, inputs, out_dir, **kwargs) -> str:
 
 def simulate_dataset(inputs, out_dir, *, n_per_input: int = 1, path_kind: str = "random", extent=2.0,
                      infinity_disparity: float = 0.0, noise: float = 0.0, seed: int = 0, n_times: int = 32,
-                     client=None, workers: int | None = None, device: str = "auto", overwrite: bool = False,
-                     callback=None, command: str | None = None) -> BatchReport:
+                     value_range=None, client=None, workers: int | None = None, device: str = "auto",
+                     overwrite: bool = False, callback=None, command: str | None = None) -> BatchReport:
     """Blur each input by ``n_per_input`` random camera paths: a dataset of (sharp, blurred, path).
 
     Item ``k`` of the input named ``name`` is written to
     ``out_dir/<name stem>_<k:04d>.npz`` (float32; the path in its metadata)
     with ``<...>.path.json`` beside it, and equals
-    ``simulate_item(read_lightfield(input), name, k, ...)`` with the same
+    ``simulate_item(read_lightfield(input, value_range=value_range), name, k, ...)`` with the same
     arguments, bit for bit on the same device and torch thread count (one
     per task here).
 
@@ -118,7 +132,7 @@ def simulate_dataset(inputs, out_dir, *, n_per_input: int = 1, path_kind: str = 
     out_dir = Path(out_dir)
     extent = list(extent) if isinstance(extent, (tuple, list)) else float(extent)
     parameters = {"path_kind": path_kind, "extent": extent, "infinity_disparity": float(infinity_disparity),
-                  "noise": float(noise), "n_times": int(n_times)}
+                  "noise": float(noise), "n_times": int(n_times), **_reading(value_range)}
     version = _version()
     specs = [make_spec("simulate", p, k, out_dir / f"{_stem(p)}_{k:04d}.npz",
                        parameters=parameters, seed=seed, overwrite=overwrite, version=version)
@@ -129,14 +143,14 @@ def simulate_dataset(inputs, out_dir, *, n_per_input: int = 1, path_kind: str = 
     return run_batch(specs, out_dir, client=client, workers=workers, device=device, card=card, callback=callback)
 
 
-def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float = 0.0, seed: int = 0, client=None,
-                workers: int | None = None, device: str = "auto", overwrite: bool = False, callback=None,
-                command: str | None = None) -> BatchReport:
+def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float = 0.0, seed: int = 0, value_range=None,
+                client=None, workers: int | None = None, device: str = "auto", overwrite: bool = False,
+                callback=None, command: str | None = None) -> BatchReport:
     """Deblur each input blindly (:func:`~napari_lfdeblur.blind.blind_deblur`) into ``out_dir``.
 
     The input named ``name`` gives ``out_dir/<name stem>.npz`` (the sharp
     estimate, float32) and ``<name stem>.path.json`` (the estimated path),
-    equal to ``blind_deblur(read_lightfield(input), params=params,
+    equal to ``blind_deblur(read_lightfield(input, value_range=value_range), params=params,
     seed=item_seed(seed, name, 0), ...)`` on the same device and torch
     thread count (one per task here).
 
@@ -167,12 +181,13 @@ def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float = 0.0
     item_seed(seed, "", 0)
     paths = expand_inputs(inputs)
     out_dir = Path(out_dir)
-    parameters = {"params": json.loads(params.to_json()), "infinity_disparity": float(infinity_disparity)}
+    reading = _reading(value_range)
+    parameters = {"params": json.loads(params.to_json()), "infinity_disparity": float(infinity_disparity), **reading}
     version = _version()
     specs = [make_spec("deblur", p, 0, out_dir / f"{_stem(p)}.npz",
                        parameters=parameters, seed=seed, overwrite=overwrite, version=version) for p in paths]
     command = command or _call_text("deblur_many", paths, out_dir, params=parameters["params"], seed=seed,
-                                    infinity_disparity=float(infinity_disparity))
+                                    infinity_disparity=float(infinity_disparity), **reading)
     card = {"kind": "deblur", "command": command, "parameters": parameters, "seed": seed, "version": version}
     return run_batch(specs, out_dir, client=client, workers=workers, device=device, card=card, callback=callback)
 

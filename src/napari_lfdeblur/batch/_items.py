@@ -225,7 +225,8 @@ def _run(spec: dict, out: Path, rec: dict) -> None:
             rec.update(kept)
         else:
             compute = _simulate if spec["kind"] == "simulate" else _deblur
-            result, cp, extra = compute(read_lightfield(spec["input"]), spec, device)
+            lf = read_lightfield(spec["input"], value_range=spec["parameters"].get("value_range"))
+            result, cp, extra = compute(lf, spec, device)
             save_path_json(spec["path_json"], cp, overwrite=True, **extra)
             meta = {"batch": item_metadata(spec), "control_points": np.asarray(cp).tolist(),
                     "version": spec["version"]}

@@ -96,7 +96,7 @@ import numpy as np
 import torch
 
 from .. import devices
-from .._lightfield import check_number
+from .._lightfield import brightest, check_number
 from .._memory import release_host_memory
 from ..blur import validate_lightfield
 from ..path import bezier_positions, canonical_time_direction, center_path, path_in_frame
@@ -410,9 +410,9 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     else:
         split = ([shear(t, d_inf) for t in gs], windows, (Y, X), rng, box)
     evidence, light = yield from iter_verdict(split, est, p, dev, frame)
-    restore = evidence["blur_found"] or not p.require_evidence
-    info.update(blur_found=evidence["blur_found"], evidence=evidence,
-                message=evidence_message(evidence, p.require_evidence, light),
+    restore, bright = evidence["blur_found"] or not p.require_evidence, brightest(arr)
+    info.update(blur_found=evidence["blur_found"], evidence=evidence, brightest=bright,
+                message=evidence_message(evidence, p.require_evidence, light, bright),
                 restoration="full" if restore else "light" if light else "none")
     cp = est.control_points if frame else path_in_frame(est.control_points, window, (Y, X))  # window -> frame
     if not restore:  # the path estimated, kept; a light restoration uses it scaled, else the result has no blur

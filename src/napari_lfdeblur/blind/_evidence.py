@@ -22,6 +22,7 @@ import math
 import numpy as np
 import torch
 
+from .._lightfield import DARK_LEVEL
 from .._noise import estimate_noise_sigma
 from ..blur import BlurOperator, image_shifts
 from ..path import bezier_positions, center_path
@@ -102,13 +103,16 @@ def evidence_weight(p: BlindParams) -> float:
     return p.latent.l0_weight * min(1.0, p.latent.l0_floor)
 
 
-def evidence_message(evidence: dict, required: bool = True, light: float = 0.0) -> str:
+def evidence_message(evidence: dict, required: bool = True, light: float = 0.0, brightest: float = 1.0) -> str:
     """A one-line description of the evidence for the blur, for people.
 
     ``required``: whether the result depends on it (else the light field was
     restored with the path whatever the evidence). ``light``: the scale of
     the path of a light restoration when little blur is found (0: the
-    input is returned).
+    input is returned). ``brightest``: the input's
+    :func:`~napari_lfdeblur._lightfield.brightest`; below
+    :data:`~napari_lfdeblur._lightfield.DARK_LEVEL`, a message of little
+    blur says that the input is dark and how to stretch it.
     """
     e = evidence
     if e["blur_found"]:
@@ -134,7 +138,12 @@ def evidence_message(evidence: dict, required: bool = True, light: float = 0.0) 
         verdict = f"a light restoration, with the estimated path at {100 * light:g} % of its length"
     else:
         verdict = "the input is returned unchanged"
-    return f"little blur found, {verdict}: " + "; ".join(why)
+    dark = ""
+    if brightest < DARK_LEVEL:
+        dark = (f". The light field is dark (99.9 % of its centre view is below {brightest:.3g}) and the salient "
+                "edges are found on an absolute scale: stretched to [0, 1] first (value_range='auto' when reading, "
+                "lfdeblur --value-range auto), its blur may show")
+    return f"little blur found, {verdict}: " + "; ".join(why) + dark
 
 
 def _objective(op, g, lam, p: BlindParams):

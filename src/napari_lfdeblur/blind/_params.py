@@ -466,7 +466,8 @@ class BlindResult:
         scaled by ``params.light_restoration``; ``'none'``: the input
         returned) and, when no significant blur was found,
         ``'rejected_path'`` (the path estimated; ``control_points`` is then
-        the path restored with, zero when ``lightfield`` is the input).
+        the path restored with, zero when ``lightfield`` is the input);
+        ``'brightest'`` (the input's centre view's 99.9th percentile).
     """
 
     lightfield: np.ndarray

@@ -38,6 +38,8 @@ from ._common import (
     LightFieldFormatError,
     LightFieldReadError,
     available_memory,
+    check_value_range,
+    parse_value_range,
 )
 from ._write import PATH_FIELDS, write_lightfield
 
@@ -55,6 +57,7 @@ __all__ = [
     "InsufficientMemoryError",
     "MEMORY_LIMIT_ENV",
     "available_memory",
+    "parse_value_range",
 ]
 
 LAYOUTS = ("views", "hci", "stanford", "eslf", "mosaic", "mat", "h5", "npy", "npz", "tiff")
@@ -206,7 +209,7 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
     metadata : dict
         JSON-serialisable: ``source`` (the path), ``layout``, ``shape``,
         ``dtype``, ``file_dtype`` (as stored), ``angular_crop`` (``[n_v, n_u]``,
-        when the views were cropped), and layout-specific entries,
+        when the views were cropped), ``value_range`` (when given), and layout-specific entries,
         such as ``camera`` (camera parameters when the file has them).
         Metadata stored by :func:`write_lightfield` is in ``saved_metadata``;
         the blur it states, ``n_times`` and ``infinity_disparity`` (as
@@ -214,6 +217,7 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
         copied to the top level.
     """
     path = _as_path(path)
+    value_range = check_value_range(value_range)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
     if layout is None:
@@ -262,6 +266,8 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
         "dtype": str(lf.dtype),
         **meta,
     }
+    if value_range is not None:
+        metadata["value_range"] = value_range if value_range == "auto" else list(value_range)
     # what a file written by this package states about the blur (T, d_inf) is read back as such
     saved = metadata.get("saved_metadata")
     for key in PATH_FIELDS:
@@ -311,8 +317,14 @@ def read_lightfield(path, *, layout: str | None = None, value_range=None, max_by
         One of :data:`LAYOUTS`; detected from the path by default
         (:func:`detect_layout`).
     value_range : (float, float) or 'auto', optional
-        Map this range of stored values to [0, 1]. By default integers are
-        divided by their dtype's maximum and floats must lie in [0, 1].
+        Map this range of stored values to [0, 1] (values beyond it are
+        clipped); ``'auto'``: the data's own minimum and maximum. By default
+        integers are divided by their dtype's maximum and floats must lie
+        in [0, 1]. Use it for data stored on another scale, such as 10- or
+        12-bit values in a 16-bit file (``(0, 4095)``): they would
+        otherwise come out dark, and the blind solver finds few edges in
+        dark data (docs/io.md). :func:`parse_value_range` reads it from
+        text. ``lo < hi``, both finite, else ``ValueError``.
     max_bytes : int, optional
         Memory the decoded light field may use; by default the available
         memory (or the ``LFDEBLUR_MEMORY_LIMIT`` environment variable). The

@@ -29,6 +29,9 @@ __all__ = [
     "check_memory",
     "central_views",
     "to_float01",
+    "parse_value_range",
+    "check_value_range",
+    "RESCALE_HINT",
     "validate_lightfield",
     "atomic_file",
     "atomic_dir",
@@ -149,6 +152,52 @@ def central_views(V: int, U: int, angular_crop, path) -> tuple[slice, slice]:
 # ----------------------------------------------------------------- values
 
 
+#: How to name the rescaling in messages: the argument, the command line's option and the widget's field.
+RESCALE_HINT = ("value_range=(lo, hi) (e.g. (0, 4095) for 12-bit data) or value_range='auto' (command line: "
+                "--value-range LO,HI or --value-range auto; napari: the Open light field widget's value range)")
+
+
+def parse_value_range(text):
+    """A ``value_range`` from text: ``''`` (None: as stored), ``'auto'``, or ``'LO,HI'`` (two numbers, ``LO < HI``).
+
+    Returns
+    -------
+    None, 'auto' or tuple of 2 float
+
+    Raises
+    ------
+    ValueError
+        On anything else, with an example of what is expected.
+
+    Examples
+    --------
+    >>> parse_value_range("0,4095")
+    (0.0, 4095.0)
+    """
+    text = "" if text is None else str(text).strip()
+    if text == "":
+        return None
+    if text.lower() == "auto":
+        return "auto"
+    try:
+        return check_value_range(tuple(float(v) for v in text.split(",")))
+    except ValueError:
+        raise ValueError(f"value range {text!r}: expected LO,HI with LO < HI, such as 0,4095, or auto") from None
+
+
+def check_value_range(value_range):
+    """``value_range`` as None, ``'auto'`` or ``(lo, hi)`` floats; ``ValueError`` unless finite with ``lo < hi``."""
+    if value_range is None or (isinstance(value_range, str) and value_range == "auto"):
+        return value_range
+    try:
+        lo, hi = (float(v) for v in value_range)
+    except (TypeError, ValueError):
+        raise ValueError(f"value_range must be (lo, hi) or 'auto', not {value_range!r}") from None
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise ValueError(f"value_range (lo, hi) must be finite with lo < hi; got {value_range!r}")
+    return lo, hi
+
+
 def to_float01(arr, path, *, value_range=None) -> np.ndarray:
     """Convert an array to float32 in [0, 1].
 
@@ -162,7 +211,11 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
     LightFieldFormatError
         On NaN or Inf, on a non-numeric dtype, or on float data outside
         [0, 1] without a ``value_range``.
+    ValueError
+        On a ``value_range`` that is neither ``'auto'`` nor finite ``(lo, hi)``
+        with ``lo < hi``.
     """
+    value_range = check_value_range(value_range)
     arr = np.asarray(arr)
     if arr.dtype == bool:
         return arr.astype(np.float32)
@@ -172,7 +225,7 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
         info = np.iinfo(arr.dtype)
         if info.min < 0 and arr.size and arr.min() < 0:
             raise LightFieldFormatError(
-                f"{path}: signed integer data has negative values; pass value_range=(lo, hi)"
+                f"{path}: signed integer data has negative values; pass {RESCALE_HINT}"
             )
         out = arr.astype(np.float32)
         out /= np.float32(info.max)  # divide (not multiply by 1/max): exact for every integer value
@@ -184,13 +237,8 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
     if out.size == 0:
         raise LightFieldFormatError(f"{path}: the light field is empty (shape {out.shape})")
     if value_range is not None:
-        if isinstance(value_range, str):
-            if value_range != "auto":
-                raise ValueError(f"value_range must be (lo, hi) or 'auto', not {value_range!r}")
-            lo, hi = float(out.min()), float(out.max())
-        else:
-            lo, hi = (float(v) for v in value_range)
-        if not hi > lo:
+        lo, hi = (float(out.min()), float(out.max())) if value_range == "auto" else value_range
+        if not hi > lo:  # 'auto' on constant data
             hi = lo + 1.0
         out = (out - np.float32(lo)) * np.float32(1.0 / (hi - lo))
         np.clip(out, 0.0, 1.0, out=out)
@@ -198,8 +246,7 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
     lo, hi = float(out.min()), float(out.max())
     if lo < -1e-3 or hi > 1.0 + 1e-3:
         raise LightFieldFormatError(
-            f"{path}: float values span [{lo:.4g}, {hi:.4g}], outside [0, 1]; pass "
-            f"value_range=(lo, hi) (e.g. (0, 255)) or value_range='auto' to rescale"
+            f"{path}: float values span [{lo:.4g}, {hi:.4g}], outside [0, 1]; to rescale, pass {RESCALE_HINT}"
         )
     if lo < 0 or hi > 1:
         np.clip(out, 0.0, 1.0, out=out)

@@ -5,10 +5,12 @@ view. This widget opens a light field with the options of
 :func:`napari_lfdeblur.io.read_lightfield` that matter for large decodes:
 ``angular_crop`` (keep the central views; a Light Field Toolbox decode of a
 Lytro Illum holds 15 x 15 views whose outer ones are dark, and people keep
-9 x 9) and the layout, when its detection needs help. Where the layout allows
-it, only the kept views are read from disk. The file is read in a worker
-thread; a file that cannot be read, or would not fit in memory, becomes an
-error notification, and no layer is added or replaced.
+9 x 9), the layout, when its detection needs help, and ``value_range``, for
+values stored on another scale (12-bit data in a 16-bit file, floats beyond
+[0, 1]). Where the layout allows it, only the kept views are read from disk.
+The file is read in a worker thread; a file that cannot be read, or would
+not fit in memory, becomes an error notification, and no layer is added or
+replaced.
 """
 
 from __future__ import annotations
@@ -16,10 +18,10 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, Label, PushButton
+from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, Label, LineEdit, PushButton
 from napari.qt.threading import thread_worker
 
-from ...io import LAYOUTS, probe_layout
+from ...io import LAYOUTS, parse_value_range, probe_layout
 from ..layers import add_layer
 from ..reader import read_lightfield_layer
 from ._controls import heading, notify_error, notify_info, spin
@@ -29,6 +31,9 @@ __all__ = ["OpenLightFieldWidget"]
 _CROP_TIP = ("keep only the central views, n_v x n_u (0: all views). A Light Field Toolbox decode of a "
              "Lytro Illum is 15 x 15 and its outer views are dark: 9 x 9 is usual. Layouts that store "
              "views separately (folders, HDF5, MATLAB v7.3, .npy) read only the kept views.")
+_RANGE_TIP = ("the stored values that become 0 and 1: LO,HI (such as 0,4095 for 12-bit data in a 16-bit file) "
+              "or auto (the data's own minimum and maximum); empty: integers by their type's maximum, floats as "
+              "they are (they must lie in [0, 1]). Dark data show the blind solver few edges: stretch them.")
 
 
 class OpenLightFieldWidget(Container):
@@ -37,9 +42,10 @@ class OpenLightFieldWidget(Container):
     Fields: ``source`` (a file, or a folder of views with *folder of views*
     ticked), ``views_v`` and ``views_u`` (central views kept, 0 for all),
     ``layout`` (``'auto'`` or one of :data:`napari_lfdeblur.io.LAYOUTS`),
-    *Open* and a status line. The new layer is added beside any layer of the
-    same name (napari makes the name unique); nothing is replaced. From a
-    script, :meth:`open_and_wait` returns the new layer.
+    ``value_range`` (empty, ``auto`` or ``LO,HI``), *Open* and a status
+    line. The new layer is added beside any layer of the same name (napari
+    makes the name unique); nothing is replaced. From a script,
+    :meth:`open_and_wait` returns the new layer.
     """
 
     def __init__(self, napari_viewer):
@@ -54,10 +60,11 @@ class OpenLightFieldWidget(Container):
         self.views_u = spin("views_u", 0, 0, 99, label="views kept (columns)", tooltip=_CROP_TIP)
         self.layout_combo = ComboBox(name="layout", label="layout", choices=("auto",) + LAYOUTS, value="auto",
                                      tooltip="how the file stores the views; 'auto' detects it")
+        self.value_range = LineEdit(name="value_range", label="value range", value="", tooltip=_RANGE_TIP)
         self.open_button = PushButton(name="open_button", text="Open")
         self.status = Label(name="status", value="choose a file")
         super().__init__(widgets=[heading("Open a light field"), self.source, self.folder_box, self.views_v,
-                                  self.views_u, self.layout_combo, self.open_button, self.status])
+                                  self.views_u, self.layout_combo, self.value_range, self.open_button, self.status])
         self.folder_box.changed.connect(self._folder_toggled)
         self.source.changed.connect(self._source_changed)
         self.open_button.changed.connect(self.open)
@@ -109,10 +116,13 @@ class OpenLightFieldWidget(Container):
             return None
         try:
             crop = self.angular_crop()
+            value_range = parse_value_range(self.value_range.value)
         except ValueError as exc:
             notify_error(f"Open a light field: {exc}")
             return None
         options = {} if crop is None else {"angular_crop": crop}
+        if value_range is not None:
+            options["value_range"] = value_range
         if self.layout_combo.value != "auto":
             options["layout"] = self.layout_combo.value
         self.status.value = f"reading {path.name} ..."

@@ -1,0 +1,52 @@
+"""The argument types of the ``lfdeblur`` command's options: each parses one option's text or raises
+:class:`argparse.ArgumentTypeError`, which argparse prints as one line."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+__all__ = ["angular_crop", "fraction", "gib", "value_range"]
+
+
+def angular_crop(text: str):
+    """``--angular-crop``: ``N`` or ``NV,NU``."""
+    try:
+        sizes = tuple(int(n) for n in text.replace("x", ",").split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected N or NV,NU such as 9 or 9,9") from None
+    if len(sizes) not in (1, 2):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected N or NV,NU such as 9 or 9,9")
+    return sizes[0] if len(sizes) == 1 else sizes
+
+
+def fraction(text: str) -> float:
+    """A number in [0, 1] (``--light-restoration``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number in [0, 1], such as 0.5") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number in [0, 1], such as 0.5")
+    return value
+
+
+def gib(text: str) -> int:
+    """A positive number of GiB, as bytes (``--max-memory``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number of GiB, such as 4 or 1.5")
+    return int(value * 2**30)
+
+
+def value_range(text: str):
+    """``--value-range``: ``LO,HI`` or ``auto`` (:func:`napari_lfdeblur.io.parse_value_range`)."""
+    from .io import parse_value_range
+
+    try:
+        return parse_value_range(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
