@@ -289,3 +289,17 @@ def test_deblur_options_reach_the_solver_and_are_checked(option, value, received
             main(["deblur", str(src), str(tmp_path / "x.npz"), option, text])
         assert message in capsys.readouterr().err
     assert len(seen) == 2 and not (tmp_path / "x.npz").exists()
+
+
+def test_a_closed_stdout_ends_the_command_quietly(lf_file):
+    # `lfdeblur info X | head -1`: the reader goes away; no error message, the status of a broken pipe
+    import subprocess
+    import sys
+
+    _, src = lf_file
+    proc = subprocess.Popen([sys.executable, "-m", "napari_lfdeblur.cli", "info", str(src)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # before the command writes anything
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141
+    assert err == ""

@@ -9,6 +9,7 @@ exit status 2, never as a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import sys
 from pathlib import Path
@@ -469,6 +470,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("lfdeblur: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader of stdout went away (lfdeblur info X | head): stop quietly, as cat does
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so that the exit's flush fails no more
+        return 141
     except (CLIError, ValueError, TypeError, OSError) as exc:
         print(f"lfdeblur {args.command}: error: {exc}", file=sys.stderr)
         return 2
