@@ -254,11 +254,21 @@ def test_zero_weight_tv_fits_the_data():
     assert rmse(resid, 0) < 0.1 * rmse(b, lf)
 
 
-def _condat_vu_reference(blurred, cp, n_times, d_inf, weight, n_iter, coupled=False):
-    """A long run of a different algorithm (Condat-Vu primal-dual, fixed steps) for the same objective + box."""
+def _condat_vu_reference(blurred, cp, n_times, d_inf, weight, n_iter, coupled=False, censored=False):
+    """A long run of a different algorithm (Condat-Vu primal-dual, fixed steps) for the same objective + box.
+
+    ``censored``: the data term of a saturated input, ``1/2 min(K x - 1, 0)^2`` at its samples at 1, and the
+    box ``x >= 0`` only (the solution clipped to [0, 1] at the end)."""
     import torch
 
     f = to_tensor(blurred, device="cpu")
+    sat = f >= 1.0
+
+    def residual(x):
+        r = op.forward(x) - f
+        return torch.where(sat & (r > 0), torch.zeros_like(r), r) if censored else r
+
+    hi = None if censored else 1.0
     op = BlurOperator(f.shape, cp, n_times=n_times, infinity_disparity=d_inf, device="cpu")
     aw = (1.0, 1.0, 1.0, 1.0)
     with torch.no_grad():
@@ -267,7 +277,7 @@ def _condat_vu_reference(blurred, cp, n_times, d_inf, weight, n_iter, coupled=Fa
         sig = 0.99 * (1.0 / tau - lip / 2.0) / gradient_norm_bound(aw)
         x, dual = f.clamp(0, 1), [torch.zeros_like(f) for _ in range(4)]
         for _ in range(n_iter):
-            x_new = (x - tau * (op.adjoint(op.forward(x) - f) - divergence4d(dual, aw))).clamp_(0, 1)
+            x_new = (x - tau * (op.adjoint(residual(x)) - divergence4d(dual, aw))).clamp_(0, hi)
             y = 2 * x_new - x
             for a in range(4):
                 n = y.shape[a]
@@ -277,10 +287,12 @@ def _condat_vu_reference(blurred, cp, n_times, d_inf, weight, n_iter, coupled=Fa
         return from_tensor(x, blurred.ndim)
 
 
-def _objective(x, blurred, cp, n_times, d_inf, weight, coupled=False):
+def _objective(x, blurred, cp, n_times, d_inf, weight, coupled=False, censored=False):
     import torch
 
     r = simulate_blur(x, cp, n_times=n_times, infinity_disparity=d_inf).astype(np.float64) - blurred
+    if censored:
+        r[(blurred >= 1.0) & (r > 0)] = 0.0
     tv = tv4d(torch.from_numpy(np.ascontiguousarray(x)).double(), coupled_channels=coupled)
     return 0.5 * float((r * r).sum()) + weight * float(tv)
 
@@ -296,12 +308,63 @@ def test_tv_reaches_the_optimum_of_a_long_reference_run(d_inf, z, coupled):
     ref = _objective(_condat_vu_reference(blurred, cp, 8, d_inf, w, 1000, coupled), blurred, cp, 8, d_inf, w, coupled)
     records = []
     out = deconvolve(blurred, cp, n_times=8, infinity_disparity=d_inf, method="tv", weight=w, n_iter=40, tol=0.0,
-                     couple_channels=coupled, callback=records.append)
+                     couple_channels=coupled, saturation=False, callback=records.append)
     got = _objective(out, blurred, cp, 8, d_inf, w, coupled)
     # 40 iterations come within 0.1 % of what 1000 Condat-Vu iterations reach (or below it)
     assert got < ref * (1 + 1e-3)
     assert records[-1].info["objective"] == pytest.approx(got, rel=1e-4)
     assert records[-1].info["blur_evaluations"] >= 40 and records[-1].info["weight"] == w
+
+
+def test_a_saturated_input_reaches_the_optimum_of_its_censored_objective():
+    # a scene brighter than the sensor's ceiling: its blur clipped at 1. The solve fits the samples at 1 only from
+    # below (the blur of the estimate must reach 1 there), lets the estimate exceed 1, and clips the result
+    lf, _ = synthetic_scene((3, 3, 16, 16), seed=9)
+    radiance = 1.3 * lf
+    cp = random_path(3, extent=2.0, z_extent=0.5, seed=4)
+    blurred = np.clip(simulate_blur(radiance, cp, n_times=8), 0, 1).astype(np.float32)
+    assert 0.05 < np.mean(blurred >= 1.0) < 0.5
+    w = 0.002
+    ref_x = _condat_vu_reference(blurred, cp, 8, 0.0, w, 1000, censored=True)
+    ref = _objective(ref_x, blurred, cp, 8, 0.0, w, censored=True)
+    records = []
+    got_x = deconvolve(blurred, cp, n_times=8, method="tv", weight=w, n_iter=60, tol=0.0, callback=records.append)
+    assert got_x.min() >= 0.0 and got_x.max() <= 1.0  # clipped once solved
+    raw = records[-1].info["objective"]  # the objective of the unclipped iterate
+    assert raw < ref * (1 + 1e-3)
+    # the censored objective is not the plain one: the plain optimum inside [0, 1] is worse on it
+    plain = deconvolve(blurred, cp, n_times=8, method="tv", weight=w, n_iter=60, tol=0.0, saturation=False)
+    assert _objective(plain, blurred, cp, 8, 0.0, w, censored=True) > ref * 1.02
+    # and it restores the clipped scene better than the plain fit does
+    truth = np.clip(radiance, 0, 1)
+    assert rmse(got_x, truth) < 0.9 * rmse(plain, truth)
+
+
+def test_censored_residual_clips_only_the_positive_residual_of_saturated_samples():
+    import torch
+
+    from napari_lfdeblur._tv_solvers import _residual
+
+    rng = np.random.default_rng(2)
+    f = torch.from_numpy(np.clip(rng.random((4, 5)) * 1.4, 0, 1))
+    Kx = torch.from_numpy(rng.random((4, 5)) * 1.4)
+    censored = torch.ge(f.reshape(-1), 1.0).nonzero().squeeze(1)
+    got = _residual(Kx, f, torch.empty_like(f), censored).numpy()
+    r = (Kx - f).numpy()
+    want = np.where((f.numpy() >= 1.0) & (r > 0), 0.0, r)
+    np.testing.assert_array_equal(got, want)
+    assert np.any(got != r) and np.any((f.numpy() >= 1.0) & (r < 0))  # both branches taken
+    np.testing.assert_array_equal(_residual(Kx, f, torch.empty_like(f), None).numpy(), r)
+
+
+def test_saturation_changes_nothing_below_the_ceiling():
+    lf, _ = synthetic_scene((3, 3, 12, 12), seed=2)
+    cp = linear_path(1.5)
+    blurred = simulate_blur(0.9 * lf, cp, n_times=6)
+    assert blurred.max() < 1.0
+    on = deconvolve(blurred, cp, n_times=6, n_iter=10)
+    off = deconvolve(blurred, cp, n_times=6, n_iter=10, saturation=False)
+    np.testing.assert_array_equal(on, off)
 
 
 @pytest.mark.parametrize("shape, isotropic, coupled, box", [

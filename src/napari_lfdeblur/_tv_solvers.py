@@ -181,10 +181,14 @@ def _dist2(a, b, buf) -> float:
 
 @torch.no_grad()
 def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, box, n_inner, lip=1.0,
-                  record=None, coupled=False):
+                  record=None, coupled=False, ceiling=None):
     """FISTA iterations; yields ``record(iteration, x, info)``, returns the last ``x``.
 
-    ``box`` is None or ``(lo, hi)``; ``n_inner``: the inner iterations of the
+    ``box`` is None or ``(lo, hi)`` (``hi`` None: no upper bound); ``ceiling``:
+    samples of ``f`` at or above it are censored, fitted by
+    ``1/2 min(K x - f, 0)^2`` (the data only bound the light from below
+    there; a sample of the residual above 0 costs nothing), a convex term
+    with the same Lipschitz bound. ``n_inner``: the inner iterations of the
     :class:`TVProx` per iteration. ``lip`` is the first estimate of the
     Lipschitz constant ``||K||^2`` of the data gradient; it is raised whenever
     the curvature seen along a step, ``||K d||^2 / ||d||^2``, exceeds it (the
@@ -211,11 +215,17 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
     # the prox's primal and dual norm live only during a call: in spare and kwork, free then
     prox = TVProx(x, n_inner, isotropic, axis_weights, box, scratch=(spare, kwork), coupled=coupled)
     scratch = (work, spare)
-    F = _objective(x, Kx, f, weight, tv, kwork, scratch)[0]
+    # the censored samples, as flat indices: their number, not the light field's size, sets the memory
+    censored = None
+    if ceiling is not None:
+        censored = torch.ge(f.reshape(-1), ceiling).nonzero().squeeze(1)
+        if f.numel() < 2**31:
+            censored = censored.to(torch.int32)
+    F = _objective(x, Kx, f, weight, tv, kwork, scratch, censored)[0]
     t = 1.0
     restarts = evaluations = 0
     for it in range(1, n_iter + 1):
-        grad = op.adjoint(torch.sub(Ky, f, out=kwork))
+        grad = op.adjoint(_residual(Ky, f, kwork, censored))
         check_cancelled()
         if grad.data_ptr() == kwork.data_ptr():  # an adjoint that returns its input: kwork is the prox's scratch
             grad = grad.clone()
@@ -230,7 +240,7 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
                 break
             lip = 1.1 * curv
         del grad
-        F_new, data = _objective(x_new, Kx_new, f, weight, tv, kwork, scratch)
+        F_new, data = _objective(x_new, Kx_new, f, weight, tv, kwork, scratch, censored)
         check_cancelled()
         step = torch.sub(x_new, x, out=work)  # x_new - x
         # adaptive restart: momentum is dropped when the objective rose or the step turned back
@@ -256,11 +266,20 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
     return x
 
 
-def _objective(x, Kx, f, weight, tv, kbuf, scratch):
+def _residual(Kx, f, out, censored):
+    """``K x - f`` into ``out``, with its positive entries at the flat indices ``censored`` set to 0 (None: none)."""
+    r = torch.sub(Kx, f, out=out)
+    if censored is not None and censored.numel():
+        flat = r.view(-1)
+        flat[censored] = flat[censored].clamp_(max=0.0)
+    return r
+
+
+def _objective(x, Kx, f, weight, tv, kbuf, scratch, censored=None):
     """``(1/2 ||K x - f||^2 + w TV4(x), data term)`` from a precomputed ``K x``; ``kbuf``, ``scratch``: buffers.
 
-    ``tv``: ``(isotropic, axis_weights, coupled)`` of :func:`tv_value`.
+    ``tv``: ``(isotropic, axis_weights, coupled)`` of :func:`tv_value`; ``censored``: as in :func:`_residual`.
     """
-    data = 0.5 * _dist2(Kx, f, kbuf)
+    data = 0.5 * float(torch.linalg.vector_norm(_residual(Kx, f, kbuf, censored))) ** 2
     isotropic, axis_weights, coupled = tv
     return data + (weight * tv_value(x, isotropic, axis_weights, scratch, coupled) if weight > 0 else 0.0), data

@@ -129,6 +129,15 @@ class DeconvolutionParams(JsonParams):
         edges are unrelated.
     clip : bool
         Constrain the estimate to [0, 1] when the input lies in [0, 1].
+    saturation : bool
+        With ``clip``, samples of the input at 1, the top of the range, are
+        taken as clipped by the sensor: they say only that the light reached
+        at least 1. The data term then asks the blur of the estimate to
+        reach 1 there, not to equal it (a censored fit), the estimate may
+        exceed 1 while it is solved (a blurred highlight needs a brighter
+        source than its clipped plateau), and the result is clipped to
+        [0, 1]. False fits every sample as it is, inside [0, 1] throughout.
+        No effect on an input below 1 everywhere.
     """
 
     method: str = "tv"
@@ -139,6 +148,7 @@ class DeconvolutionParams(JsonParams):
     axis_weights: tuple = (1.0, 1.0, 1.0, 1.0)
     couple_channels: bool = True
     clip: bool = True
+    saturation: bool = True
 
     _what = "deconvolution"
 
@@ -165,6 +175,7 @@ class DeconvolutionParams(JsonParams):
         object.__setattr__(self, "isotropic", bool(self.isotropic))
         object.__setattr__(self, "couple_channels", bool(self.couple_channels))
         object.__setattr__(self, "clip", bool(self.clip))
+        object.__setattr__(self, "saturation", bool(self.saturation))
 
     def effective_weight(self, method: str, sigma: float | None = None, n_channels: int = 1) -> float:
         """The weight used by ``method``.
@@ -234,9 +245,10 @@ def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: Deconv
     ``f``, ``x0``: (V, U, Y, X, C); each group's result is written into
     ``out`` (the input's numpy shape), which is returned.
     """
-    box = None
+    box, saturated = None, False
     if params.clip and float(f.min()) >= 0.0 and float(f.max()) <= 1.0:
-        box = (0.0, 1.0)
+        saturated = params.saturation and float(f.max()) >= 1.0
+        box = (0.0, None) if saturated else (0.0, 1.0)  # saturated: clipped to [0, 1] once solved
     C = f.shape[-1]
     view = out if out.ndim == 5 else out[..., None]
     groups = _channel_groups(params, C)
@@ -244,7 +256,8 @@ def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: Deconv
         def record(it, x, info, cs=cs, g=g):
             def estimate():
                 full = out.copy()
-                (full if full.ndim == 5 else full[..., None])[..., cs] = from_tensor(x, 5)
+                part = from_tensor(x, 5)
+                (full if full.ndim == 5 else full[..., None])[..., cs] = part.clip(0.0, 1.0) if saturated else part
                 return full
 
             return Progress(stage="tv", iteration=g * params.n_iter + it, n_iterations=len(groups) * params.n_iter,
@@ -255,8 +268,9 @@ def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: Deconv
         x0c = fc if x0 is f else x0[..., cs].contiguous()  # the start is the data unless given
         x = yield from iter_fista_tv(op, fc, x0c, weight=weight, n_iter=params.n_iter, tol=params.tol,
                                      isotropic=params.isotropic, axis_weights=params.axis_weights, box=box,
-                                     n_inner=N_INNER, record=record, coupled=params.couple_channels)
-        view[..., cs] = from_tensor(x, 5)
+                                     n_inner=N_INNER, record=record, coupled=params.couple_channels,
+                                     ceiling=1.0 if saturated else None)
+        view[..., cs] = from_tensor(x.clamp_(0.0, 1.0) if saturated else x, 5)
         del x
     return out
 
