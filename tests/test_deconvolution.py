@@ -708,6 +708,14 @@ def test_cli_deconvolve(tmp_path, capsys):
         assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--iterations", "3", *flag]) == 0
         ref = deconvolve(colour, cp, n_times=8, n_iter=3, couple_channels=coupled)
         np.testing.assert_allclose(read_lightfield(out), ref, atol=1e-5)
+    # saturated samples: fitted as such unless --no-saturation
+    bright = np.clip(1.3 * blurred, 0, 1)
+    np.savez(src, lf=bright)
+    for flag, saturation in (([], True), (["--no-saturation"], False)):
+        assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--iterations", "3", *flag]) == 0
+        ref = deconvolve(bright, cp, n_times=8, n_iter=3, saturation=saturation)
+        np.testing.assert_allclose(read_lightfield(out), ref, atol=1e-5)
+    assert not np.allclose(ref, deconvolve(bright, cp, n_times=8, n_iter=3))
     np.savez(src, lf=blurred)
     # bad input: one line, exit status 2
     assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--weight", "-1"]) == 2

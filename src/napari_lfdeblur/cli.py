@@ -379,6 +379,9 @@ def _add_deconvolve(sub):
     p.add_argument("--separate-channels", action="store_true",
                    help="tv on colour: one TV per channel instead of one colour TV over the channels (about a "
                         "third of the memory; for channels whose edges are unrelated)")
+    p.add_argument("--no-saturation", action="store_true",
+                   help="tv: fit samples at 1 as they are, inside [0, 1] (default: as saturated, where the light "
+                        "reached at least 1; see docs/deconvolution.md)")
     p.add_argument("--iterations", type=int, default=200, help="maximum TV iterations (default 200)")
     p.add_argument("--tol", type=float, default=1e-4,
                    help="TV stops when the objective falls by less than this fraction in an iteration (default 1e-4)")
@@ -417,7 +420,7 @@ def _run_deconvolve(args):
     gen = iter_deconvolve(
         blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device,
         method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
-        couple_channels=not args.separate_channels,
+        couple_channels=not args.separate_channels, saturation=not args.no_saturation,
     )
     bar = _progress(total=args.iterations, desc="deconvolve", unit="it")
     last = []
