@@ -280,6 +280,37 @@ def test_deconvolve_colour_tv_box(make_napari_viewer, qtbot, notifications):
         viewer.layers.remove(out)
 
 
+def test_deconvolve_saturated_samples_box(make_napari_viewer, qtbot, notifications):
+    from napari_lfdeblur import synthetic_scene
+    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+    from napari_lfdeblur.deconvolution import deconvolve
+
+    lf, _ = synthetic_scene((3, 3, 16, 16), seed=2)
+    cp = np.array([[-0.5, 0.2, 0.1], [0.6, -0.3, -0.1]])
+    bright = np.clip(simulate_blur(1.4 * lf, cp, n_times=6), 0, 1).astype(np.float32)  # clipped highlights
+    viewer = make_napari_viewer()
+    viewer.add_image(bright, name="b")
+    w = _dock(viewer, DeconvolveWidget(viewer))
+    w.layer_combo.set_layer("b")
+    w.table.set_control_points(cp)
+    w.form.n_times.value = 6
+    w.form.n_iter.value = 4
+    assert w.form.saturation.value  # on by default
+    results = []
+    for saturation in (True, False):
+        w.form.saturation.value = saturation
+        w.run()
+        _wait_done(qtbot, w)
+        assert not [n for n in notifications if n[0] == "error"], notifications
+        out = viewer.layers["b deconvolved"]
+        np.testing.assert_allclose(out.data, deconvolve(bright, cp, n_times=6, n_iter=4, saturation=saturation),
+                                   atol=1e-5)
+        assert out.metadata["parameters"]["saturation"] is saturation
+        results.append(out.data.copy())
+        viewer.layers.remove(out)
+    assert not np.allclose(*results)
+
+
 def test_deconvolve_solver_error_is_a_notification(make_napari_viewer, qtbot, lf, notifications):
     from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
 

@@ -45,6 +45,10 @@ def _fields() -> list:
         CheckBox(name="couple_channels", value=True, label="colour TV",
                  tooltip="tv on colour: one TV over the channels, which keeps the edges they share (the "
                          "default); untick for one TV per channel, in about a third of the memory"),
+        CheckBox(name="saturation", value=True, label="saturated samples",
+                 tooltip="tv: samples at 1 are taken as clipped by the sensor (the light there reached at least "
+                         "1): the blur of the result must reach 1 there, and the result is clipped to [0, 1] "
+                         "(the default); untick to fit them as they are"),
         CheckBox(name="noise_weight", value=True, label="weight from noise",
                  tooltip=f"TV weight = {COLOUR_WEIGHT_FACTOR} x (colour TV) or {NOISE_WEIGHT_FACTOR} x (one TV per "
                          "channel) the noise level estimated in the data (inplane: 2e-3); untick to set the "
