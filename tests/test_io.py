@@ -856,6 +856,8 @@ def test_cli_value_range_and_the_dark_note(tmp_path, lf_rgb, capsys):
     assert main(["info", str(tmp_path / "dim.npy"), "--value-range", "auto"]) == 0
     out = capsys.readouterr().out
     assert "dark" not in out and "value range: [0, 1]" in out
+    assert "saturated:   " + f"{100 / (lf_rgb.size):.3g} % of the samples are at 1" in out  # the maximum, stretched
+    assert main(["info", str(tmp_path / "dim.npy")]) == 0 and "saturated" not in capsys.readouterr().out
 
 
 def test_cli_angular_crop(tmp_path, lf_rgb, capsys):

@@ -337,6 +337,8 @@ def _add_info(sub):
 def _run_info(args):
     import json
 
+    import numpy as np
+
     options = {"layout": args.layout}
     if args.grid:
         try:
@@ -351,6 +353,10 @@ def _run_info(args):
     print(f"shape:       {lf.shape}  (V, U, Y, X{', C' if lf.ndim == 5 else ''})")
     print(f"dtype:       {lf.dtype} (stored as {meta.get('file_dtype', '?')})")
     print(f"value range: [{float(lf.min()):.6g}, {float(lf.max()):.6g}], mean {float(lf.mean()):.6g}")
+    at_top = float(np.mean(lf >= 1.0))
+    if at_top > 0:
+        print(f"saturated:   {100 * at_top:.3g} % of the samples are at 1 (deconvolution fits them as clipped by the "
+              "sensor: the light there reached at least 1)")
     bright = brightest(lf)
     if bright < DARK_LEVEL and args.value_range is None:
         print(f"note:        dark: 99.9 % of the centre view is below {bright:.3g} (10- or 12-bit data in a 16-bit "
