@@ -252,63 +252,38 @@ def test_deconvolve_tv_with_path_from_path_layer(make_napari_viewer, qtbot, lf, 
     assert viewer.layers["b deconvolved"].metadata["parameters"]["weight"] is None
 
 
-def test_deconvolve_colour_tv_box(make_napari_viewer, qtbot, notifications):
+@pytest.mark.parametrize("box", ["couple_channels", "saturation"], ids=["colour TV", "saturated samples"])
+def test_deconvolve_boxes_reach_the_solver(box, make_napari_viewer, qtbot, notifications):
     from napari_lfdeblur import synthetic_scene
     from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
     from napari_lfdeblur.deconvolution import deconvolve
 
-    colour, _ = synthetic_scene((3, 3, 16, 16), color=True, seed=2)
+    # colour TV: a colour scene; saturated samples: a scene brighter than the sensor's ceiling, its blur clipped
+    colour = box == "couple_channels"
+    lf, _ = synthetic_scene((3, 3, 16, 16), color=colour, seed=2)
     cp = np.array([[-0.5, 0.2, 0.1], [0.6, -0.3, -0.1]])
-    blurred = simulate_blur(colour, cp, n_times=6)
+    blurred = simulate_blur(lf if colour else 1.4 * lf, cp, n_times=6)
+    blurred = blurred if colour else np.clip(blurred, 0, 1).astype(np.float32)
     viewer = make_napari_viewer()
-    viewer.add_image(blurred, name="b", rgb=True)
+    viewer.add_image(blurred, name="b", rgb=colour)
     w = _dock(viewer, DeconvolveWidget(viewer))
     w.layer_combo.set_layer("b")
     w.table.set_control_points(cp)
     w.form.n_times.value = 6
     w.form.n_iter.value = 4
-    assert w.form.couple_channels.value  # the colour TV by default
-    for coupled in (True, False):
-        w.form.couple_channels.value = coupled
-        w.run()
-        _wait_done(qtbot, w)
-        assert not [n for n in notifications if n[0] == "error"], notifications
-        out = viewer.layers["b deconvolved"]
-        ref = deconvolve(blurred, cp, n_times=6, n_iter=4, couple_channels=coupled)
-        np.testing.assert_allclose(out.data, ref, atol=1e-5)
-        assert out.metadata["parameters"]["couple_channels"] is coupled
-        viewer.layers.remove(out)
-
-
-def test_deconvolve_saturated_samples_box(make_napari_viewer, qtbot, notifications):
-    from napari_lfdeblur import synthetic_scene
-    from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
-    from napari_lfdeblur.deconvolution import deconvolve
-
-    lf, _ = synthetic_scene((3, 3, 16, 16), seed=2)
-    cp = np.array([[-0.5, 0.2, 0.1], [0.6, -0.3, -0.1]])
-    bright = np.clip(simulate_blur(1.4 * lf, cp, n_times=6), 0, 1).astype(np.float32)  # clipped highlights
-    viewer = make_napari_viewer()
-    viewer.add_image(bright, name="b")
-    w = _dock(viewer, DeconvolveWidget(viewer))
-    w.layer_combo.set_layer("b")
-    w.table.set_control_points(cp)
-    w.form.n_times.value = 6
-    w.form.n_iter.value = 4
-    assert w.form.saturation.value  # on by default
+    assert getattr(w.form, box).value  # on by default
     results = []
-    for saturation in (True, False):
-        w.form.saturation.value = saturation
+    for on in (True, False):
+        getattr(w.form, box).value = on
         w.run()
         _wait_done(qtbot, w)
         assert not [n for n in notifications if n[0] == "error"], notifications
         out = viewer.layers["b deconvolved"]
-        np.testing.assert_allclose(out.data, deconvolve(bright, cp, n_times=6, n_iter=4, saturation=saturation),
-                                   atol=1e-5)
-        assert out.metadata["parameters"]["saturation"] is saturation
+        np.testing.assert_allclose(out.data, deconvolve(blurred, cp, n_times=6, n_iter=4, **{box: on}), atol=1e-5)
+        assert out.metadata["parameters"][box] is on
         results.append(out.data.copy())
         viewer.layers.remove(out)
-    assert not np.allclose(*results)
+    assert not np.allclose(*results)  # the box changes the result
 
 
 def test_deconvolve_solver_error_is_a_notification(make_napari_viewer, qtbot, lf, notifications):
