@@ -18,3 +18,15 @@ def notifications(monkeypatch):
     monkeypatch.setattr(_controls, "show_info", lambda msg: seen.append(("info", msg)))
     monkeypatch.setattr(_controls, "show_warning", lambda msg: seen.append(("warning", msg)))
     return seen
+
+
+@pytest.fixture(params=["fused", "torch"])
+def engine(request, monkeypatch):
+    """Runs a test with the blur's fused CPU loops (numba) and again with its torch version."""
+    from napari_lfdeblur import _fused
+
+    if request.param == "fused" and not _fused.available("cpu"):
+        pytest.skip("numba is not installed")
+    if request.param == "torch":
+        monkeypatch.setattr(_fused, "available", lambda device: False)
+    return request.param

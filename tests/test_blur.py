@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from _reference import blur_reference
-from napari_lfdeblur import random_path, simulate_blur
+from napari_lfdeblur import _fused, random_path, simulate_blur
 from napari_lfdeblur.blur import BlurOperator, to_tensor
 from napari_lfdeblur.path import bezier_positions, center_path
 
@@ -13,7 +13,7 @@ from napari_lfdeblur.path import bezier_positions, center_path
 @pytest.mark.parametrize("shape", [(5, 4, 7, 9), (3, 5, 6, 5, 3)], ids=["gray", "colour"])
 @pytest.mark.parametrize("d_inf", [0.0, 0.7, -1.3])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_simulate_blur_matches_brute_force(shape, d_inf, seed):
+def test_simulate_blur_matches_brute_force(shape, d_inf, seed, engine):
     rng = np.random.default_rng(seed)
     lf = rng.random(shape).astype(np.float32)
     cp = random_path(n_points=int(rng.integers(2, 5)), extent=3.0, z_extent=2.0, seed=seed + 10)
@@ -23,7 +23,8 @@ def test_simulate_blur_matches_brute_force(shape, d_inf, seed):
     np.testing.assert_allclose(got, want, atol=1e-5)
 
 
-def test_small_blocks_give_the_same_result():
+def test_small_blocks_give_the_same_result(monkeypatch):
+    monkeypatch.setattr(_fused, "available", lambda device: False)  # blocks are the torch version's
     rng = np.random.default_rng(3)
     lf = torch.rand(4, 5, 11, 6, 2, dtype=torch.float64)
     cp = random_path(3, extent=2.0, z_extent=1.0, seed=2)
@@ -34,7 +35,7 @@ def test_small_blocks_give_the_same_result():
     torch.testing.assert_close(big.adjoint(y), tiny.adjoint(y))
 
 
-def test_taps_left_out_where_they_weigh_nothing_change_nothing():
+def test_taps_left_out_where_they_weigh_nothing_change_nothing(engine):
     # a large p_z moves the (v, y) and (u, x) offsets across the image: in blocks of one row, many of the 4D
     # kernel's taps weigh nothing, or only in some columns, and are left out there
     rng = np.random.default_rng(4)
@@ -43,8 +44,11 @@ def test_taps_left_out_where_they_weigh_nothing_change_nothing():
     op = BlurOperator(lf.shape, cp, n_times=6, infinity_disparity=1.5, device="cpu", dtype=torch.float64,
                       block_elements=1)
     taps = op._taps()
-    n_taps, X = len(taps.taps), lf.shape[3]
-    assert any(len(spans) < n_taps or any(b - a < X for _, a, b in spans) for spans in taps.spans)
+    X = lf.shape[3]
+    if engine == "torch":
+        assert any(len(spans) < len(taps.taps) or any(b - a < X for _, a, b in spans) for spans in taps.spans)
+    else:  # the fused loops' column spans, per tap and row
+        assert (taps.x0 >= taps.x1).any() and ((taps.x1 - taps.x0) < X).any()
     x = torch.from_numpy(lf)
     np.testing.assert_allclose(op.forward(x).numpy(), blur_reference(lf, cp, 6, 1.5), atol=1e-12)
     y = torch.from_numpy(rng.random(lf.shape))
@@ -102,7 +106,7 @@ def test_center_path_zero_mean():
 
 
 @pytest.mark.parametrize("d_inf", [0.0, 0.6])
-def test_gradcheck_lightfield_and_path(d_inf):
+def test_gradcheck_lightfield_and_path(d_inf, engine):
     torch.manual_seed(0)
     lf = torch.rand(3, 4, 5, 4, 1, dtype=torch.float64, requires_grad=True)
     # keep away from integer sample positions, where bilinear weights have kinks
@@ -116,7 +120,7 @@ def test_gradcheck_lightfield_and_path(d_inf):
 
 
 @pytest.mark.parametrize("d_inf", [0.0, 0.8])
-def test_adjoint(d_inf):
+def test_adjoint(d_inf, engine):
     gen = torch.Generator().manual_seed(1)
     shape = (4, 5, 7, 6, 3)
     x = torch.rand(shape, generator=gen, dtype=torch.float64)
@@ -128,11 +132,13 @@ def test_adjoint(d_inf):
     assert abs(float(lhs - rhs)) < 1e-10 * float(abs(lhs))
 
 
-def test_adjoint_equals_autograd_vjp():
+@pytest.mark.parametrize("d_inf", [0.0, -0.9])
+def test_adjoint_equals_autograd_vjp(d_inf, engine):
     shape = (3, 4, 5, 6, 1)
     x = torch.rand(shape, dtype=torch.float64, requires_grad=True)
     y = torch.rand(shape, dtype=torch.float64)
-    op = BlurOperator(shape, random_path(3, 2.0, 1.0, seed=0), n_times=5, device="cpu", dtype=torch.float64)
+    op = BlurOperator(shape, random_path(3, 2.0, 1.0, seed=0), n_times=5, infinity_disparity=d_inf, device="cpu",
+                      dtype=torch.float64)
     (g,) = torch.autograd.grad(op.forward(x), x, y)
     torch.testing.assert_close(op.adjoint(y), g)
 
@@ -203,3 +209,36 @@ def test_a_tile_with_its_frame_blurs_like_the_full_light_field(d_inf):
                                atol=1e-5)
     with pytest.raises(ValueError, match="does not fit"):
         BlurOperator((5, 5, h, w), cp, device="cpu", frame=(20, 0, 30, 40))
+
+
+@pytest.mark.parametrize("d_inf", [0.0, 4.0])
+def test_fused_loops_agree_with_the_torch_version_far_past_the_edges(d_inf, monkeypatch):
+    # at 4 px/view and p_z = 3 most taps of the outer views read beyond every edge of a 6 x 5 view
+    if not _fused.available("cpu"):
+        pytest.skip("numba is not installed")
+    gen = torch.Generator().manual_seed(6)
+    shape = (4, 3, 6, 5, 2)
+    lf = torch.rand(shape, generator=gen, dtype=torch.float64, requires_grad=True)
+    y = torch.rand(shape, generator=gen, dtype=torch.float64)
+    cp = torch.tensor([[-1.6, 0.9, -3.0], [2.1, -1.2, 3.0], [0.3, 1.7, 1.0]], dtype=torch.float64, requires_grad=True)
+    results = []
+    for use_fused in (True, False):
+        monkeypatch.setattr(_fused, "available", lambda device, use=use_fused: use)
+        op = BlurOperator(shape, cp, n_times=9, infinity_disparity=d_inf, device="cpu", dtype=torch.float64)
+        assert isinstance(op._taps(), _fused.FusedTaps) == use_fused
+        out = op.forward(lf)
+        results.append([out, op.adjoint(y), *torch.autograd.grad((out * y).sum(), (lf, cp))])
+    for got, want in zip(*results):
+        torch.testing.assert_close(got, want, rtol=1e-12, atol=1e-12)
+
+
+def test_the_fused_loops_can_be_turned_off(monkeypatch):
+    monkeypatch.setenv("NAPARI_LFDEBLUR_NUMBA", "0")
+    _fused._loops.cache_clear()
+    try:
+        assert not _fused.available("cpu")
+        op = BlurOperator((3, 3, 4, 5), [[0, 0, 0.5], [1, 0, -0.5]], n_times=3, infinity_disparity=0.5, device="cpu")
+        assert not isinstance(op._taps(), _fused.FusedTaps)
+    finally:
+        _fused._loops.cache_clear()
+    assert not _fused.available("cuda")

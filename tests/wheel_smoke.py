@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import torch
 
 
 def check(condition, message):
@@ -40,6 +41,20 @@ def main():
         getattr(lfd, name)
     check(not any(m.split(".")[0] in ("napari", "qtpy", "PyQt6", "PySide6") for m in sys.modules),
           f"every public name ({len(lfd.__all__)}) loads without napari or Qt")
+
+    # the blur's fused CPU loops: numba comes with the package, and they agree with the torch version
+    from napari_lfdeblur import _fused
+    from napari_lfdeblur.blur import BlurOperator
+
+    check(_fused.available("cpu"), "the fused CPU loops (numba) are available")
+    x = torch.rand(3, 4, 6, 7, 2, dtype=torch.float64)
+    op = BlurOperator(x.shape, [[-1, 0.5, 0.4], [1, -0.5, -0.4]], n_times=5, infinity_disparity=0.8, device="cpu",
+                      dtype=torch.float64)
+    fused = op.forward(x)
+    _fused.available = lambda device: False
+    check(torch.allclose(fused, BlurOperator(x.shape, op.control_points, n_times=5, infinity_disparity=0.8,
+                                             device="cpu", dtype=torch.float64).forward(x), atol=1e-12),
+          "the fused loops blur as the torch version does")
 
     # every sample loads (the Lytro crop is a PNG inside the wheel)
     lf, disp = lfd.synthetic_scene((5, 5, 16, 16))

@@ -30,6 +30,10 @@ With ``d_inf != 0`` each instant also shifts ``y`` and ``x``; the exposure is
 then one kernel over 4D integer offsets ``(v, y, u, x)``, applied the same
 way (:func:`~napari_lfdeblur._taps4d.tap_kernel_4d`).
 
+On the CPU, when numba is installed, both kernels are applied by fused loops
+instead (:mod:`~napari_lfdeblur._fused`): one parallel pass over the output
+rows, with no padded copies, and the same sums.
+
 A path with rotation (6 columns) displaces the image by amounts that vary
 over the whole view; its 4D kernels are built and applied per spatial tile
 (:mod:`~napari_lfdeblur._taps_tiled`).
@@ -40,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from . import _fused
 from ._lightfield import check_number, validate_lightfield
 from .devices import select_device
 from ._taps import TapBlur, Taps, tap_kernel
@@ -320,6 +325,7 @@ class BlurOperator:
         if cp.shape[1] == 6 and (cp.requires_grad or has_rotation(cp)):
             self.kind = "tiled"
         self._tiles = None  # the TiledTaps of a path with rotation (its tiles' index vectors cost to build)
+        self._fused = None  # the FusedTaps of the kernel, on the CPU with numba (its column spans cost to find)
         if self.kind == "angular":
             self._kernel = tap_kernel(self.s_u, self.s_v, U, V)
         elif self.kind == "4d":
@@ -381,7 +387,18 @@ class BlurOperator:
         return self._taps().adjoint(full)
 
     def _taps(self):
-        """The object that applies the kernel (:class:`Taps`, :class:`Taps4D` or :class:`TiledTaps`)."""
+        """The object that applies the kernel: :class:`Taps`, :class:`Taps4D` or :class:`TiledTaps`.
+
+        Without rotation, on the CPU and with numba, the fused loops of
+        :mod:`~napari_lfdeblur._fused` (a :class:`FusedTaps`) instead.
+        """
+        if self.kind != "tiled" and _fused.available(self.device):
+            if self._fused is None:
+                if self.kind == "angular":
+                    self._fused = _fused.FusedTaps.angular(self.shape, *self._kernel)
+                else:
+                    self._fused = _fused.FusedTaps(self.shape, *self._kernel)
+            return self._fused
         if self.kind == "angular":
             K, ov, ou = self._kernel
             return Taps(self.shape, K, ov, ou, self.block_elements)
