@@ -3,7 +3,8 @@
 Usage::
 
     python benchmarks/bench_infinity_disparity.py [--shape 9 9 376 541 3] [--n-times 16 32]
-        [--infinity-disparity 0 0.5 1 1.5 2 -1] [--device auto|cpu|cuda] [--out PATH]
+        [--infinity-disparity 0 0.5 1 1.5 2 -1] [--device auto|cpu|cuda]
+        [--engine fused torch] [--out PATH]
 
 For every ``T`` and ``d_inf`` it measures, on a random light field and a
 random path with ``p_z != 0``: the time to build the operator (its kernel),
@@ -21,7 +22,9 @@ The table goes to ``docs/benchmarks/bench_infinity_disparity.md`` (or ``--out``)
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
+import os
 import subprocess
 import sys
 import time
@@ -31,6 +34,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from napari_lfdeblur import _fused
 from napari_lfdeblur.blur import BlurOperator
 from napari_lfdeblur.devices import select_device
 from napari_lfdeblur.path import random_path
@@ -111,6 +115,8 @@ def main(argv=None):
     parser.add_argument("--infinity-disparity", type=float, nargs="+", default=[0.0, 0.5, 1.0, 1.5, 2.0, -1.0])
     parser.add_argument("--device", default="auto")
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--engine", nargs="+", choices=["fused", "torch"], default=["fused", "torch"],
+                        help="the blur's fused CPU loops (numba) and/or its torch version; a GPU has only the latter")
     parser.add_argument("--point", nargs=2, type=float, help=argparse.SUPPRESS)  # child: T, d_inf
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
@@ -120,27 +126,29 @@ def main(argv=None):
         return
     device = select_device(args.device)
     ds = sorted(set(args.infinity_disparity) | {0.0}, key=lambda d: (d != 0.0, abs(d), d))
+    engines = [e for e in args.engine if e == "torch" or (device.type == "cpu" and _fused.available(device))]
     rows = []
-    for T in args.n_times:
-        for d in ds:
-            cmd = [sys.executable, __file__, "--point", str(T), str(d), "--shape", *map(str, shape),
-                   "--device", str(device), "--repeats", str(args.repeats)]
-            res = subprocess.run(cmd, capture_output=True, text=True)
-            if res.returncode != 0:
-                print(f"T={T} d_inf={d} failed:\n{res.stderr[-2000:]}")
-                continue
-            row = json.loads(res.stdout.strip().splitlines()[-1])
-            ref = next((r for r in rows if r["n_times"] == T and r["d_inf"] == 0.0), row)
-            row["ratio_fwd_adj"] = row["fwd_adj_s"] / ref["fwd_adj_s"]
-            row["ratio_fwd_bwd"] = row["fwd_bwd_s"] / ref["fwd_bwd_s"]
-            rows.append(row)
-            print(_line(row), flush=True)
+    for engine, T, d in itertools.product(engines, args.n_times, ds):
+        cmd = [sys.executable, __file__, "--point", str(T), str(d), "--shape", *map(str, shape),
+               "--device", str(device), "--repeats", str(args.repeats)]
+        env = {**os.environ, "NAPARI_LFDEBLUR_NUMBA": "1" if engine == "fused" else "0"}
+        res = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        if res.returncode != 0:
+            print(f"{engine} T={T} d_inf={d} failed:\n{res.stderr[-2000:]}")
+            continue
+        row = json.loads(res.stdout.strip().splitlines()[-1]) | {"engine": engine}
+        ref = next((r for r in rows if (r["engine"], r["n_times"], r["d_inf"]) == (engine, T, 0.0)), row)
+        row["ratio_fwd_adj"] = row["fwd_adj_s"] / ref["fwd_adj_s"]
+        row["ratio_fwd_bwd"] = row["fwd_bwd_s"] / ref["fwd_bwd_s"]
+        rows.append(row)
+        print(_line(row), flush=True)
     if rows:
         _write(rows, shape, args, argv, device)
 
 
 def _line(r) -> str:
-    return (f"| {r['n_times']} | {r['d_inf']:+.1f} | {r['taps']} | {r['build_s']:.3f} | {r['fwd_adj_s']:.3f} | "
+    return (f"| {r['engine']} | {r['n_times']} | {r['d_inf']:+.1f} | {r['taps']} | {r['build_s']:.3f} | "
+            f"{r['fwd_adj_s']:.3f} | "
             f"{r['ratio_fwd_adj']:.2f} | {2000 * r['copy_s']:.3g} | {r['fwd_adj_s'] / (2 * r['copy_s']):.1f} | "
             f"{r['fwd_bwd_s']:.3f} | {r['ratio_fwd_bwd']:.2f} | {r['peak_extra_x_lf']:.2f} |")
 
@@ -151,15 +159,17 @@ def _write(rows, shape, args, argv, device):
         f"4-point path with `p_z != 0` (extent 3 views); best of {args.repeats} runs. *Build*: making the "
         "operator (its kernel). *Forward + adjoint*: one of each, as a non-blind iteration does. *Forward + "
         "backward*: loss `0.5 ||f - b||^2` with gradients for the light field and the path, as a blind path fit "
-        "does. Ratios are against `d_inf = 0` at the same `T`. *Floor*: the memory-traffic floor of a forward "
+        "does. *Engine*: `fused`, the CPU loops compiled by numba (the default on the CPU), or `torch`, the torch "
+        "version (`NAPARI_LFDEBLUR_NUMBA=0`; the only one on a GPU). Ratios are against `d_inf = 0` with the same "
+        "engine and `T`. *Floor*: the memory-traffic floor of a forward "
         "plus an adjoint, each of which must read one light field and write one: twice the time of a plain copy "
         "of the light field on the device (`dst.copy_(src)`, best of 3 x the runs), which measures the "
         "bandwidth actually available; *x floor*: forward + adjoint over that floor. Peak memory: above the "
         "light field, target and path during forward+backward, in units of the light field's size.",
         "",
-        "| T | d_inf | taps | build (s) | forward + adjoint (s) | ratio | floor (ms) | x floor | "
+        "| engine | T | d_inf | taps | build (s) | forward + adjoint (s) | ratio | floor (ms) | x floor | "
         "forward + backward (s) | ratio | peak extra memory (x light field) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
         *[_line(r) for r in rows],
     ]
     _report.write_table(_report.table_path(args.out, __file__), "Blur operator at non-zero infinity disparity",

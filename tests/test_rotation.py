@@ -28,7 +28,7 @@ def _lf(shape, seed=0):
 
 
 @pytest.mark.parametrize("d_inf", [0.0, 0.7, -1.3])
-def test_6dof_blur_matches_brute_force(d_inf):
+def test_6dof_blur_matches_brute_force(d_inf, engine):
     # 40x52 px: several tiles of the tiled kernel, each with its own taps
     lf = _lf((5, 5, 40, 52, 2))
     out = simulate_blur(lf, CP6, n_times=9, infinity_disparity=d_inf)
@@ -48,7 +48,7 @@ def test_3_column_paths_are_bit_identical_to_6_columns_without_rotation():
 
 
 @pytest.mark.parametrize("d_inf", [0.0, 0.6])
-def test_6dof_adjoint(d_inf):
+def test_6dof_adjoint(d_inf, engine):
     op = BlurOperator((5, 5, 40, 52, 2), CP6, n_times=9, infinity_disparity=d_inf, device="cpu")
     g = torch.Generator().manual_seed(0)
     x = torch.rand(op.shape, generator=g, dtype=torch.float64).float()
@@ -58,7 +58,7 @@ def test_6dof_adjoint(d_inf):
     assert abs(lhs - rhs) <= 1e-5 * abs(lhs)
 
 
-def test_6dof_gradcheck_lightfield_and_path():
+def test_6dof_gradcheck_lightfield_and_path(engine):
     cp = torch.tensor(CP6[:2], dtype=torch.float64, requires_grad=True)
     L = torch.rand(3, 3, 10, 12, 1, dtype=torch.float64, generator=torch.Generator().manual_seed(2), requires_grad=True)
 
@@ -70,7 +70,7 @@ def test_6dof_gradcheck_lightfield_and_path():
 
 
 @pytest.mark.parametrize("shape", [(5, 5, 40, 52, 2), (4, 7, 20, 18, 1)])
-def test_view_step_computes_the_subsampled_views_with_their_gradients(shape):
+def test_view_step_computes_the_subsampled_views_with_their_gradients(shape, engine):
     # the strided tiles against the whole blur, sliced: values, and the gradients for the light field
     # (the adjoint of the strided blur) and for the path (the kernel's gradient)
     g = torch.Generator().manual_seed(3)
@@ -104,7 +104,7 @@ def test_view_step_without_rotation_slices_the_whole_blur():
 
 @pytest.mark.parametrize("cp, d_inf", [(CP6[:, :3], 0.0), (CP6[:, :3], 0.5), (CP6, 0.0), (CP6, -0.7)])
 @pytest.mark.parametrize("step", [2, 3])
-def test_view_step_forward_and_adjoint_are_adjoint(cp, d_inf, step):
+def test_view_step_forward_and_adjoint_are_adjoint(cp, d_inf, step, engine):
     op = BlurOperator((5, 4, 20, 18, 2), cp, n_times=6, infinity_disparity=d_inf, dtype=torch.float64, device="cpu")
     g = torch.Generator().manual_seed(step)
     x = torch.rand(op.shape, generator=g, dtype=torch.float64)

@@ -32,7 +32,7 @@ import threading
 import numpy as np
 import torch
 
-__all__ = ["available", "FusedTaps"]
+__all__ = ["available", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad", "FusedTaps"]
 
 _LOCK = threading.Lock()  # numba's default thread pool runs one parallel loop at a time
 
@@ -62,8 +62,45 @@ def _run(name, *args):
         getattr(_loops(), name)(*args)
 
 
+def rows(t: torch.Tensor) -> np.ndarray:
+    """``t`` (V, U, Y, X, C) as a numpy array of rows (V, U, Y, X * C), sharing its memory where contiguous."""
+    V, U, Y, X, C = t.shape
+    return t.detach().contiguous().numpy().reshape(V, U, Y, X * C)
+
+
+def column_spans(K: torch.Tensor):
+    """``(x0, x1)``, int64 numpy arrays (S, h): per tap and row of ``K`` (S, h, w), the columns it weighs in."""
+    used = K.detach() != 0
+    first = used.to(torch.uint8).argmax(dim=2)
+    past = K.shape[2] - used.flip(2).to(torch.uint8).argmax(dim=2)
+    any_x = used.any(dim=2)
+    return torch.where(any_x, first, 0).numpy().astype(np.int64), torch.where(any_x, past, 0).numpy().astype(np.int64)
+
+
+def forward(L, K, offsets, spans, out, origin=(0, 0), view_step=1):
+    """Writes the blur of ``L`` at the pixels of ``K`` (S, h, w), at ``origin`` ``(r0, c0)``, into ``out``.
+
+    ``L`` is (V, U, Y, X, C); ``out`` holds the views ``0, view_step, ...``
+    and must be contiguous. ``offsets`` is an int64 numpy array (S, 4),
+    ``spans`` what :func:`column_spans` gives for ``K``.
+    """
+    _run("forward", rows(L), K.detach().to(L.dtype).contiguous().numpy(), offsets, *spans, *origin, view_step,
+         L.shape[4], rows(out))
+
+
+def add_adjoint(G, K, offsets, spans, out, origin=(0, 0), view_step=1):
+    """Adds the adjoint of :func:`forward` applied to ``G`` to ``out`` (V, U, Y, X, C), contiguous."""
+    _run("adjoint", rows(G), K.detach().to(G.dtype).contiguous().numpy(), offsets, *spans, *origin, view_step,
+         G.shape[4], rows(out))
+
+
+def kernel_grad(L, G, offsets, out, origin=(0, 0), view_step=1):
+    """Writes ``d<G, forward(L)>/dK`` into ``out`` (S, h, w), contiguous, of ``G``'s dtype."""
+    _run("kernel_grad", rows(L.to(G.dtype)), rows(G), offsets, *origin, view_step, G.shape[4], out.numpy())
+
+
 class FusedTaps:
-    """A tap kernel applied by the fused loops: the interface of :class:`~napari_lfdeblur._taps.Taps`.
+    """A tap kernel over the whole view, applied by the fused loops (the interface of :class:`~._taps.Taps`).
 
     Parameters
     ----------
@@ -81,15 +118,9 @@ class FusedTaps:
     def __init__(self, shape, K, offsets, to_kernel=None):
         self.shape = tuple(shape)
         self.to_kernel = to_kernel
-        V, U, Y, X, C = self.shape
         self.K = K.detach().contiguous()
         self.offsets = np.ascontiguousarray(np.asarray(offsets, dtype=np.int64).reshape(-1, 4))
-        used = self.K != 0  # (S, Y, X): the columns each tap weighs something in, per row
-        any_x = used.any(dim=2)
-        first = used.to(torch.uint8).argmax(dim=2)
-        past = X - used.flip(2).to(torch.uint8).argmax(dim=2)
-        self.x0 = torch.where(any_x, first, 0).numpy().astype(np.int64)
-        self.x1 = torch.where(any_x, past, 0).numpy().astype(np.int64)
+        self.spans = column_spans(self.K)
 
     @classmethod
     def angular(cls, shape, K, ov, ou):
@@ -110,28 +141,20 @@ class FusedTaps:
 
         return cls(shape, stack, [(ov + i, 0, ou + j, 0) for i, j in active], to_kernel)
 
-    def _rows(self, t):
-        """``t`` (V, U, Y, X, C) as a numpy view of rows (V, U, Y, X * C)."""
-        V, U, Y, X, C = self.shape
-        return t.detach().contiguous().numpy().reshape(V, U, Y, X * C)
-
-    def _weights(self, dtype):
-        return self.K.to(dtype).numpy()
-
     def forward(self, L):
         out = torch.empty(self.shape, dtype=L.dtype)
-        _run("forward", self._rows(L), self._weights(L.dtype), self.offsets, self.x0, self.x1, self._rows(out))
+        forward(L, self.K, self.offsets, self.spans, out)
         return out
 
     def backward(self, L, G, need_L=True, need_K=False):
         """``(adjoint(G), d<G, forward(L)>/dK)``, each None when not needed."""
         gL = gK = None
         if need_L:
-            gL = torch.empty(self.shape, dtype=G.dtype)
-            _run("adjoint", self._rows(G), self._weights(G.dtype), self.offsets, self.x0, self.x1, self._rows(gL))
+            gL = torch.zeros(self.shape, dtype=G.dtype)
+            add_adjoint(G, self.K, self.offsets, self.spans, gL)
         if need_K:
             gK = torch.empty(self.K.shape, dtype=G.dtype)
-            _run("kernel_grad", self._rows(L.to(G.dtype)), self._rows(G), self.offsets, gK.numpy())
+            kernel_grad(L, G, self.offsets, gK)
             gK = gK.to(self.K.dtype)
             if self.to_kernel is not None:
                 gK = self.to_kernel(gK)

@@ -23,8 +23,10 @@ import copy
 import itertools
 import math
 
+import numpy as np
 import torch
 
+from . import _fused
 from ._taps import fold
 from ._taps4d import axis_taps
 
@@ -269,6 +271,9 @@ class _Tile:
         dev = offsets.device
         self.rows, self.cols, self.start = rows, cols, start
         self.h, self.w = rows.stop - rows.start, cols.stop - cols.start
+        self.origin = (rows.start, cols.start)
+        self.offsets = np.ascontiguousarray(offsets.cpu().numpy(), dtype=np.int64)
+        self.spans = None  # the fused loops' column spans of its taps, when they are used
         off = offsets.tolist()
         lo = [min(min(o[i] for o in off), 0) for i in range(4)]
         hi = [max(max(o[i] for o in off), 0) for i in range(4)]
@@ -306,6 +311,11 @@ class TiledTaps:
         self.K = K.detach()
         self.tiles = [_Tile(shape, *entry) for entry in layout]
         self.view_step = 1
+        #: on the CPU with numba, each tile is applied by the fused loops of :mod:`~napari_lfdeblur._fused`
+        self.fused = _fused.available(self.K.device)
+        if self.fused:
+            for tile in self.tiles:
+                tile.spans = _fused.column_spans(tile.kernel(self.K))
 
     def with_view_step(self, view_step: int) -> "TiledTaps":
         """The same kernels and tiles, with output views ``0, view_step, ...`` only."""
@@ -329,6 +339,11 @@ class TiledTaps:
         V, U, Y, X, C = self.shape
         s = self.view_step
         out = L.new_empty((len(range(0, V, s)), len(range(0, U, s)), Y, X, C))
+        if self.fused:
+            L = L.contiguous()
+            for tile in self.tiles:
+                _fused.forward(L, tile.kernel(self.K), tile.offsets, tile.spans, out, tile.origin, s)
+            return out
         for tile in self.tiles:
             Lp = tile.padded(L)
             Kt = tile.kernel(self.K)
@@ -343,6 +358,8 @@ class TiledTaps:
         V, U, _, _, C = self.shape
         gL = G.new_zeros(self.shape) if need_L else None
         gK = torch.zeros_like(self.K) if need_K else None
+        if self.fused:
+            return self._backward_fused(L, G, gL, gK)
         for tile in self.tiles:
             Gb = G[:, :, tile.rows, tile.cols].permute(0, 1, 4, 2, 3).contiguous()
             if need_K:
@@ -359,6 +376,17 @@ class TiledTaps:
                 g = fold(fold(gp, 0, tile.iv_list, V), 1, tile.iu_list, U)
                 g = _fold_clamped(_fold_clamped(g, 3, tile.pad_rows), 4, tile.pad_cols)
                 gL[:, :, tile.src_rows, tile.src_cols] += g.permute(0, 1, 3, 4, 2)
+        return gL, gK
+
+    def _backward_fused(self, L, G, gL, gK):
+        G = G.contiguous()
+        for tile in self.tiles:
+            if gK is not None:
+                g = G.new_empty((len(tile.taps), tile.h, tile.w))
+                _fused.kernel_grad(L.contiguous(), G, tile.offsets, g, tile.origin, self.view_step)
+                tile.kernel(gK).copy_(g)
+            if gL is not None:
+                _fused.add_adjoint(G, tile.kernel(self.K), tile.offsets, tile.spans, gL, tile.origin, self.view_step)
         return gL, gK
 
     def adjoint(self, G):
