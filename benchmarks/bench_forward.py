@@ -2,7 +2,8 @@
 
 Usage::
 
-    python benchmarks/bench_forward.py [--shape 9 9 376 541 3] [--n-times 16] [--device auto|cpu|cuda] [--out PATH]
+    python benchmarks/bench_forward.py [--shape 9 9 376 541 3] [--n-times 16] [--device auto|cpu|cuda]
+        [--variants ours ours-torch grid_sample] [--out PATH]
 
 For each implementation it prints the forward time, the forward+backward
 time (loss ``0.5 ||f - b||^2``, gradients for the light field and the control
@@ -106,7 +107,7 @@ def run_variant(variant, shape, n_times, device, repeats, block_elements=None):
     lf_bytes = L.numel() * L.element_size()
 
     def forward(L, cp):
-        if variant == "ours":
+        if variant.startswith("ours"):
             return BlurOperator(shape, cp, n_times=n_times, device=device, block_elements=block_elements).forward(L)
         return gridsample_blur(L, cp, n_times)
 
@@ -163,8 +164,10 @@ def main(argv=None):
     parser.add_argument("--device", default="auto")
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--block-elements", type=int, default=None, help="block size of ours (default: per device)")
-    parser.add_argument("--variants", nargs="+", default=["ours", "grid_sample"], choices=["ours", "grid_sample"])
-    parser.add_argument("--variant", choices=["ours", "grid_sample"], help=argparse.SUPPRESS)
+    variants = ["ours", "ours-torch", "grid_sample"]
+    parser.add_argument("--variants", nargs="+", default=variants, choices=variants,
+                        help="ours: the default (on the CPU the fused loops, with numba); ours-torch: its torch version")
+    parser.add_argument("--variant", choices=variants, help=argparse.SUPPRESS)
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
     shape = tuple(args.shape)
@@ -181,7 +184,8 @@ def main(argv=None):
                "--n-times", str(args.n_times), "--device", str(device), "--repeats", str(args.repeats)]
         if args.block_elements:
             cmd += ["--block-elements", str(args.block_elements)]
-        res = subprocess.run(cmd, capture_output=True, text=True)
+        env = {**os.environ, "NAPARI_LFDEBLUR_NUMBA": "0"} if variant == "ours-torch" else None
+        res = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if res.returncode != 0:
             print(f"{variant} failed:\n{res.stderr[-2000:]}")
             continue
@@ -189,13 +193,20 @@ def main(argv=None):
     print(f"{'implementation':<14} {'forward (s)':>12} {'fwd+bwd (s)':>12} {'peak extra (x LF)':>18}")
     for r in rows:
         print(f"{r['variant']:<14} {r['forward_s']:>12.3f} {r['forward_backward_s']:>12.3f} {r['peak_extra_x_lf']:>18.2f}")
-    if len(rows) == 2:
-        ours, ref = rows
-        print(f"speed-up of ours over grid_sample: forward {ref['forward_s'] / ours['forward_s']:.1f}x, "
-              f"forward+backward {ref['forward_backward_s'] / ours['forward_backward_s']:.1f}x")
+    for line in _speed_ups(rows):
+        print(line)
     print(f"(light field size: {rows[0]['lf_mb']:.0f} MiB)" if rows else "")
     if rows:
         _write(rows, shape, args, argv, device)
+
+
+def _speed_ups(rows):
+    """Sentences: each of our variants over grid_sample, where both ran."""
+    by = {r["variant"]: r for r in rows}
+    ref = by.get("grid_sample")
+    return [f"Speed-up of {name} over grid_sample: forward {ref['forward_s'] / r['forward_s']:.1f}x, "
+            f"forward + backward {ref['forward_backward_s'] / r['forward_backward_s']:.1f}x."
+            for name, r in by.items() if ref is not None and name != "grid_sample"]
 
 
 def _write(rows, shape, args, argv, device):
@@ -206,17 +217,16 @@ def _write(rows, shape, args, argv, device):
         f"best of {args.repeats} runs. Peak memory: the memory in use above the light field, target and path "
         "during forward+backward, in units of the light field's size (resident set size on the CPU, "
         "`torch.cuda.max_memory_allocated` on a GPU). `grid_sample`: the same model written directly with "
-        "`torch.nn.functional.grid_sample` (every pixel a batch item).",
+        "`torch.nn.functional.grid_sample` (every pixel a batch item). `ours`: the default, which on the CPU runs "
+        "the fused loops compiled by numba; `ours-torch`: its torch version (`NAPARI_LFDEBLUR_NUMBA=0`, the one "
+        "a GPU runs).",
         "",
         "| implementation | forward (s) | forward + backward (s) | peak extra memory (x light field) |",
         "|---|---|---|---|",
         *[f"| {r['variant']} | {r['forward_s']:.3f} | {r['forward_backward_s']:.3f} | {r['peak_extra_x_lf']:.2f} |"
           for r in rows],
     ]
-    if len(rows) == 2:
-        ours, ref = rows
-        body += ["", f"Speed-up of ours over grid_sample: forward {ref['forward_s'] / ours['forward_s']:.1f}x, "
-                     f"forward + backward {ref['forward_backward_s'] / ours['forward_backward_s']:.1f}x."]
+    body += ["", *_speed_ups(rows)] if _speed_ups(rows) else []
     _report.write_table(_report.table_path(args.out, __file__), "Blur operator: speed and memory",
                         _report.command_line(__file__, argv), _report.machine(str(device)), body)
 
