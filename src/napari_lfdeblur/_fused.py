@@ -5,8 +5,9 @@ offsets ``(a, b, c, e)`` of ``(v, y, u, x)``::
 
     f[v, u, y, x] = sum_s K[s, y, x] l[clamp(v + a), clamp(u + c), clamp(y + b), clamp(x + e)]
 
-(:mod:`~napari_lfdeblur._taps` at ``d_inf = 0``, where ``b = e = 0``, and
-:mod:`~napari_lfdeblur._taps4d` otherwise). The torch versions make one
+(:mod:`~napari_lfdeblur._taps` at ``d_inf = 0``, where ``b = e = 0``,
+:mod:`~napari_lfdeblur._taps4d` otherwise, and with rotation one such kernel
+per spatial tile, :mod:`~napari_lfdeblur._taps_tiled`). The torch versions make one
 multiply-add pass over a block of the light field per tap, through padded
 copies. These loops instead make one pass over the output, row by row in
 parallel: the rows a tap reads stay in cache, nothing is padded or copied,
@@ -49,9 +50,9 @@ def _loops():
     return _fused_loops
 
 
-def available(device) -> bool:
-    """True when the fused loops can run on ``device`` (the CPU, with numba)."""
-    return torch.device(device).type == "cpu" and _loops() is not None
+def available(device, dtype=torch.float32) -> bool:
+    """True when the fused loops can run on ``device`` and ``dtype``: the CPU, float32 or float64, with numba."""
+    return torch.device(device).type == "cpu" and dtype in (torch.float32, torch.float64) and _loops() is not None
 
 
 def _run(name, *args):
@@ -62,8 +63,13 @@ def _run(name, *args):
         getattr(_loops(), name)(*args)
 
 
-def rows(t: torch.Tensor) -> np.ndarray:
-    """``t`` (V, U, Y, X, C) as a numpy array of rows (V, U, Y, X * C), sharing its memory where contiguous."""
+def rows(t: torch.Tensor, out: bool = False) -> np.ndarray:
+    """``t`` (V, U, Y, X, C) as a numpy array of rows (V, U, Y, X * C), sharing its memory where contiguous.
+
+    An ``out`` tensor, which the loops write, must be contiguous (a copy would lose what they write).
+    """
+    if out and not t.is_contiguous():
+        raise ValueError("the fused loops write into contiguous tensors only")
     V, U, Y, X, C = t.shape
     return t.detach().contiguous().numpy().reshape(V, U, Y, X * C)
 
@@ -74,7 +80,7 @@ def column_spans(K: torch.Tensor):
     first = used.to(torch.uint8).argmax(dim=2)
     past = K.shape[2] - used.flip(2).to(torch.uint8).argmax(dim=2)
     any_x = used.any(dim=2)
-    return torch.where(any_x, first, 0).numpy().astype(np.int64), torch.where(any_x, past, 0).numpy().astype(np.int64)
+    return tuple(torch.where(any_x, t, 0).numpy().astype(np.int64) for t in (first, past))
 
 
 def forward(L, K, offsets, spans, out, origin=(0, 0), view_step=1):
@@ -85,17 +91,19 @@ def forward(L, K, offsets, spans, out, origin=(0, 0), view_step=1):
     ``spans`` what :func:`column_spans` gives for ``K``.
     """
     _run("forward", rows(L), K.detach().to(L.dtype).contiguous().numpy(), offsets, *spans, *origin, view_step,
-         L.shape[4], rows(out))
+         L.shape[4], rows(out, out=True))
 
 
 def add_adjoint(G, K, offsets, spans, out, origin=(0, 0), view_step=1):
     """Adds the adjoint of :func:`forward` applied to ``G`` to ``out`` (V, U, Y, X, C), contiguous."""
     _run("adjoint", rows(G), K.detach().to(G.dtype).contiguous().numpy(), offsets, *spans, *origin, view_step,
-         G.shape[4], rows(out))
+         G.shape[4], rows(out, out=True))
 
 
 def kernel_grad(L, G, offsets, out, origin=(0, 0), view_step=1):
     """Writes ``d<G, forward(L)>/dK`` into ``out`` (S, h, w), contiguous, of ``G``'s dtype."""
+    if not out.is_contiguous():
+        raise ValueError("the fused loops write into contiguous tensors only")
     _run("kernel_grad", rows(L.to(G.dtype)), rows(G), offsets, *origin, view_step, G.shape[4], out.numpy())
 
 

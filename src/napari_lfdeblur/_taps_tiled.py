@@ -312,7 +312,7 @@ class TiledTaps:
         self.tiles = [_Tile(shape, *entry) for entry in layout]
         self.view_step = 1
         #: on the CPU with numba, each tile is applied by the fused loops of :mod:`~napari_lfdeblur._fused`
-        self.fused = _fused.available(self.K.device)
+        self.fused = _fused.available(self.K.device, self.K.dtype)
         if self.fused:
             for tile in self.tiles:
                 tile.spans = _fused.column_spans(tile.kernel(self.K))

@@ -392,7 +392,7 @@ class BlurOperator:
         Without rotation, on the CPU and with numba, the fused loops of
         :mod:`~napari_lfdeblur._fused` (a :class:`FusedTaps`) instead.
         """
-        if self.kind != "tiled" and _fused.available(self.device):
+        if self.kind != "tiled" and _fused.available(self.device, self.dtype):
             if self._fused is None:
                 if self.kind == "angular":
                     self._fused = _fused.FusedTaps.angular(self.shape, *self._kernel)
