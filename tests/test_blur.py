@@ -243,3 +243,22 @@ def test_the_fused_loops_can_be_turned_off(monkeypatch):
     finally:
         _fused._loops.cache_clear()
     assert not _fused.available("cuda") and not _fused.available("cpu", torch.float16)
+
+
+def test_a_numba_that_fails_to_load_falls_back_with_a_warning(monkeypatch):
+    import sys
+
+    import napari_lfdeblur
+
+    monkeypatch.delattr(napari_lfdeblur, "_fused_loops", raising=False)
+    monkeypatch.setitem(sys.modules, "napari_lfdeblur._fused_loops", None)  # its import now raises ImportError
+    _fused._loops.cache_clear()
+    try:
+        with pytest.warns(RuntimeWarning, match="numba could not be loaded.*torch version"):
+            assert not _fused.available("cpu")
+        lf = np.random.default_rng(8).random((3, 3, 5, 6)).astype(np.float32)
+        cp = [[-0.4, 0.3, 0.5], [0.6, -0.2, -0.5]]
+        np.testing.assert_allclose(simulate_blur(lf, cp, n_times=5, infinity_disparity=0.5, device="cpu"),
+                                   blur_reference(lf, cp, 5, 0.5), atol=1e-5)
+    finally:
+        _fused._loops.cache_clear()

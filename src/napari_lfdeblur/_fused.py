@@ -19,8 +19,8 @@ thread owns the rows it writes), so it needs no atomic adds. Clamped indices
 make edge rows and columns collect the terms of every sample read beyond
 the edge, as the model's replicate boundary does.
 
-Used on the CPU when numba imports; ``NAPARI_LFDEBLUR_NUMBA=0`` turns it off
-(then the torch versions run). The kernels are compiled on first use and
+Used on the CPU when numba imports (a warning, once, says when it does not);
+``NAPARI_LFDEBLUR_NUMBA=0`` turns it off (then the torch versions run). The kernels are compiled on first use and
 cached on disk by numba.
 """
 
@@ -29,6 +29,7 @@ from __future__ import annotations
 import functools
 import os
 import threading
+import warnings
 
 import numpy as np
 import torch
@@ -45,7 +46,10 @@ def _loops():
         return None
     try:
         from . import _fused_loops
-    except Exception:  # noqa: BLE001 - numba not installed, or built for another numpy
+    except Exception as exc:  # noqa: BLE001 - numba not installed, or built for another numpy
+        warnings.warn(f"numba could not be loaded ({type(exc).__name__}: {exc}); the blur runs its slower torch "
+                      "version on the CPU (set NAPARI_LFDEBLUR_NUMBA=0 to choose that and silence this)",
+                      RuntimeWarning, stacklevel=2)
         return None
     return _fused_loops
 
