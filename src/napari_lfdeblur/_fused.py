@@ -20,8 +20,8 @@ make edge rows and columns collect the terms of every sample read beyond
 the edge, as the model's replicate boundary does.
 
 Used on the CPU when numba imports (a warning, once, says when it does not);
-``NAPARI_LFDEBLUR_NUMBA=0`` turns it off (then the torch versions run). The kernels are compiled on first use and
-cached on disk by numba.
+``NAPARI_LFDEBLUR_NUMBA=0`` turns it off (then the torch versions run). The
+kernels are compiled on first use and cached on disk by numba.
 """
 
 from __future__ import annotations

@@ -380,10 +380,12 @@ class TiledTaps:
 
     def _backward_fused(self, L, G, gL, gK):
         G = G.contiguous()
+        if gK is not None:
+            L = L.to(G.dtype).contiguous()  # once, not per tile
         for tile in self.tiles:
             if gK is not None:
                 g = G.new_empty((len(tile.taps), tile.h, tile.w))
-                _fused.kernel_grad(L.contiguous(), G, tile.offsets, g, tile.origin, self.view_step)
+                _fused.kernel_grad(L, G, tile.offsets, g, tile.origin, self.view_step)
                 tile.kernel(gK).copy_(g)
             if gL is not None:
                 _fused.add_adjoint(G, tile.kernel(self.K), tile.offsets, tile.spans, gL, tile.origin, self.view_step)
