@@ -30,3 +30,15 @@ def engine(request, monkeypatch):
     if request.param == "torch":
         monkeypatch.setattr(_fused, "available", lambda *args: False)
     return request.param
+
+
+def wrap_prox_inner_iteration(monkeypatch, wrapper):
+    """Replaces what each inner iteration of the TV prox calls once by ``wrapper(real, *args, **kwargs)``.
+
+    That is the fused sweep where the fused loops run, the torch version's dual projection otherwise.
+    """
+    from napari_lfdeblur import _fused, _tv_solvers
+
+    module, name = (_fused, "prox_sweep") if _fused.available("cpu") else (_tv_solvers, "project_tv_dual")
+    real = getattr(module, name)
+    monkeypatch.setattr(module, name, lambda *args, **kwargs: wrapper(real, *args, **kwargs))

@@ -25,6 +25,7 @@ from napari_lfdeblur import _noise
 from napari_lfdeblur.deconvolution import N_INNER, COLOUR_WEIGHT_FACTOR, NOISE_WEIGHT_FACTOR, estimate_noise_sigma
 from napari_lfdeblur.priors import divergence4d, gradient4d, gradient_norm_bound, project_tv_dual, tv4d
 from napari_lfdeblur.special_cases import inplane_matrix, inplane_psf
+from conftest import wrap_prox_inner_iteration
 
 
 def rmse(a, b, mask=None):
@@ -212,25 +213,23 @@ def test_generator_returns_result_and_close_stops_it():
     assert n == 3 and result.shape == lf.shape and result.dtype == np.float32
 
 
-def test_a_cancelled_tv_solve_stops_inside_the_iteration(monkeypatch):
+def test_a_cancelled_tv_solve_stops_inside_the_iteration(monkeypatch, engine):
     import threading
 
-    from napari_lfdeblur import _tv_solvers
     from napari_lfdeblur.progress import Cancelled, cancellable
 
     lf = np.random.default_rng(5).random((3, 3, 8, 8)).astype(np.float32)
     cp = linear_path(1.0, z=1.0)
     stop = threading.Event()
     calls = []
-    real = _tv_solvers.project_tv_dual
 
-    def counting(*args, **kwargs):  # one inner iteration of the TV prox; the second of iteration 2 asks to stop
+    def counting(real, *args, **kwargs):  # one inner iteration of the TV prox; the second of iteration 2 stops
         calls.append(stop.is_set())
         if len(calls) == N_INNER + 2:
             stop.set()
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(_tv_solvers, "project_tv_dual", counting)
+    wrap_prox_inner_iteration(monkeypatch, counting)
     gen = iter_deconvolve(lf, cp, n_times=4, n_iter=50, tol=0.0)  # N_INNER inner iterations per iteration
     with cancellable(stop):
         assert next(gen).iteration == 1 and len(calls) == N_INNER
@@ -299,7 +298,7 @@ def _objective(x, blurred, cp, n_times, d_inf, weight, coupled=False, censored=F
 
 @pytest.mark.parametrize("d_inf, z, coupled", [(0.0, 1.5, False), (1.0, 0.0, False), (1.0, 1.0, True)],
                          ids=["p_z", "d_inf", "colour TV"])
-def test_tv_reaches_the_optimum_of_a_long_reference_run(d_inf, z, coupled):
+def test_tv_reaches_the_optimum_of_a_long_reference_run(d_inf, z, coupled, engine):
     lf, _ = synthetic_scene((3, 3, 16, 16), color=coupled, seed=9)
     cp = random_path(3, extent=2.0, z_extent=z, seed=4)
     blurred = simulate_blur(lf, cp, n_times=8, infinity_disparity=d_inf)
@@ -374,7 +373,7 @@ def test_saturation_changes_nothing_below_the_ceiling():
     ((3, 3, 8, 5), False, False, (0.0, 1.0)),
     ((3, 2, 1, 5), True, False, None),
 ])
-def test_tv_prox_in_blocks_of_rows_is_the_whole_field_gradient_projection(shape, isotropic, coupled, box):
+def test_tv_prox_in_blocks_of_rows_is_the_whole_field_gradient_projection(shape, isotropic, coupled, box, engine):
     import torch
 
     from napari_lfdeblur._tv_solvers import TVProx
@@ -397,12 +396,37 @@ def test_tv_prox_in_blocks_of_rows_is_the_whole_field_gradient_projection(shape,
             p = [a + step * b for a, b in zip(p, g)]
             project_tv_dual(p, 1.0, isotropic, coupled_channels=coupled)
         ref.append(clip(v + mu * divergence4d(p, aw)))
-    for rows in (None, 1, 2, 3, 100):  # blocks of 1, 2, 3 rows, the whole field, the default
+    for rows in (None, 1, 2, 3, 100):  # blocks of 1, 2, 3 rows, the whole field, the default (torch version)
         prox = TVProx(vs[0], n_inner, isotropic, aw, box, coupled=coupled, rows=rows)
+        assert prox.fused == (engine == "fused")
         for v, r in zip(vs, ref):
             out = torch.empty_like(v)
             prox(v, mu, out)
             np.testing.assert_allclose(out.numpy(), r.numpy(), atol=1e-12)
+
+
+@pytest.mark.parametrize("shape", [(3, 4, 7, 5, 3), (2, 3, 6, 4), (3, 1, 1, 5, 2)])
+@pytest.mark.parametrize("isotropic", [True, False])
+@pytest.mark.parametrize("coupled", [True, False])
+def test_tv_value_is_the_weighted_tv4(shape, isotropic, coupled, engine):
+    import torch
+
+    from napari_lfdeblur._tv_solvers import tv_value
+
+    if coupled and len(shape) == 4:
+        pytest.skip("the colour TV needs a channel axis")
+    aw = (0.5, 0.0, 1.0, 2.0)
+    x = torch.as_tensor(np.random.default_rng(4).random(shape))
+    # the weighted forward differences, zero-padded to the field's shape, and their norms written out
+    grads = [aw[a] * (x.narrow(a, 1, x.shape[a] - 1) - x.narrow(a, 0, x.shape[a] - 1)) for a in range(4)]
+    full = [torch.nn.functional.pad(g, [0, 0] * (x.dim() - 1 - a) + [0, 1]) for a, g in enumerate(grads)]
+    sq = [g * g for g in full]
+    if isotropic:
+        s = sum(sq)
+        want = (s.sum(-1) if coupled else s).sqrt().sum()
+    else:
+        want = sum((q.sum(-1).sqrt() if coupled else q.sqrt()).sum() for q in sq)
+    assert tv_value(x, isotropic, aw, coupled=coupled) == pytest.approx(float(want), rel=1e-12)
 
 
 def test_colour_tv_of_equal_channels_is_the_grey_tv_at_sqrt3_its_weight():

@@ -14,6 +14,7 @@ pytest.importorskip("pytestqt")
 import napari_lfdeblur  # noqa: E402
 from napari_lfdeblur.blur import simulate_blur  # noqa: E402
 from napari_lfdeblur.path import bezier_positions  # noqa: E402
+from conftest import wrap_prox_inner_iteration  # noqa: E402
 
 SHAPE = (5, 5, 16, 16)
 TIMEOUT = 120_000  # ms: a guard against hangs
@@ -437,18 +438,17 @@ def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, not
 def test_cancel_stops_inside_a_tv_iteration(make_napari_viewer, qtbot, lf, notifications, monkeypatch):
     import time
 
-    from napari_lfdeblur import _tv_solvers
     from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
+    from napari_lfdeblur.deconvolution import N_INNER
 
     calls = []
-    real = _tv_solvers.project_tv_dual
 
-    def slow(*args, **kwargs):  # each inner iteration of the TV prox takes 0.1 s: 5 of them per iteration
+    def slow(real, *args, **kwargs):  # each inner iteration of the TV prox takes 0.1 s, N_INNER per iteration
         calls.append(time.perf_counter())
         time.sleep(0.1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(_tv_solvers, "project_tv_dual", slow)
+    wrap_prox_inner_iteration(monkeypatch, slow)
     viewer = make_napari_viewer()
     viewer.add_image(lf, name="b")
     w = _dock(viewer, DeconvolveWidget(viewer))
@@ -457,13 +457,13 @@ def test_cancel_stops_inside_a_tv_iteration(make_napari_viewer, qtbot, lf, notif
     w.form.method.value = "tv"
     w.form.n_iter.value = 1000
     w.run()
-    qtbot.waitUntil(lambda: len(calls) >= 7, timeout=TIMEOUT)  # inside the second iteration
+    qtbot.waitUntil(lambda: len(calls) >= N_INNER + 1, timeout=TIMEOUT)  # inside the second iteration
     at_cancel = len(calls)
     w.cancel()
     _wait_done(qtbot, w)
     qtbot.wait(100)
-    # the inner iteration under way finishes, then the solve stops: it does not run to the iteration's end (10)
-    assert len(calls) <= at_cancel + 1 < 10
+    # the inner iteration under way finishes, then the solve stops: it does not run to the iteration's end
+    assert len(calls) <= at_cancel + 1 < 2 * N_INNER
     assert [layer.name for layer in viewer.layers] == ["b"] and w.last_result is None
     assert ("info", "4D deconvolution: cancelled") in notifications
     assert not [n for n in notifications if n[0] == "error"], notifications

@@ -1,4 +1,4 @@
-"""The tap blur, its adjoint and its kernel gradient as fused CPU loops (numba).
+"""The tap blur (its adjoint, its kernel gradient) and the 4D-TV prox's inner iteration as fused CPU loops (numba).
 
 A tap kernel is ``S`` weight maps ``K[s]`` of shape ``(Y, X)`` with integer
 offsets ``(a, b, c, e)`` of ``(v, y, u, x)``::
@@ -19,6 +19,11 @@ thread owns the rows it writes), so it needs no atomic adds. Clamped indices
 make edge rows and columns collect the terms of every sample read beyond
 the edge, as the model's replicate boundary does.
 
+The TV prox's dual gradient projection (:func:`prox_sweep`,
+:func:`prox_primal`) and the TV's value (:func:`tv_value`) are such loops
+too, for :class:`~napari_lfdeblur._tv_solvers.TVProx`: each sample of the
+dual is read and written once per iteration.
+
 Used on the CPU when numba imports (a warning, once, says when it does not);
 ``NAPARI_LFDEBLUR_NUMBA=0`` turns it off (then the torch versions run). The
 kernels are compiled on first use and cached on disk by numba.
@@ -34,7 +39,8 @@ import warnings
 import numpy as np
 import torch
 
-__all__ = ["available", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad", "FusedTaps"]
+__all__ = ["available", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad", "FusedTaps", "prox_sweep",
+           "prox_primal", "tv_value"]
 
 _LOCK = threading.Lock()  # numba's default thread pool runs one parallel loop at a time
 
@@ -47,8 +53,8 @@ def _loops():
     try:
         from . import _fused_loops
     except Exception as exc:  # noqa: BLE001 - numba not installed, or built for another numpy
-        warnings.warn(f"numba could not be loaded ({type(exc).__name__}: {exc}); the blur runs its slower torch "
-                      "version on the CPU (set NAPARI_LFDEBLUR_NUMBA=0 to choose that and silence this)",
+        warnings.warn(f"numba could not be loaded ({type(exc).__name__}: {exc}); the blur and the TV solver run their "
+                      "slower torch versions on the CPU (set NAPARI_LFDEBLUR_NUMBA=0 to choose that and silence this)",
                       RuntimeWarning, stacklevel=2)
         return None
     return _fused_loops
@@ -109,6 +115,49 @@ def kernel_grad(L, G, offsets, out, origin=(0, 0), view_step=1):
     if not out.is_contiguous():
         raise ValueError("the fused loops write into contiguous tensors only")
     _run("kernel_grad", rows(L.to(G.dtype)), rows(G), offsets, *origin, view_step, G.shape[4], out.numpy())
+
+
+def _rows5(t, out=False):
+    """:func:`rows` of a (V, U, Y, X, C) tensor, or of a (V, U, Y, X) one as one channel."""
+    return rows(t if t.dim() == 5 else t.unsqueeze(-1), out)
+
+
+def _prox_args(v, dual, weights, box):
+    """The arguments the prox loops share: rows of ``v`` and of the dual, weights, box and unit in v's dtype."""
+    arr = _rows5(v)
+    t = arr.dtype.type
+    lo, hi = (1.0, 0.0) if box is None else (box[0], np.inf if box[1] is None else box[1])
+    return arr, [_rows5(p, out=True) for p in dual], np.asarray(weights, arr.dtype), t(lo), t(hi), t(1.0)
+
+
+def prox_sweep(v, dual, primal_weights, dual_weights, box, isotropic, coupled, blocks, scratch):
+    """One iteration of the TV prox's dual gradient projection, in place on ``dual``.
+
+    ``v`` (V, U, Y, X, C), or (V, U, Y, X) as one channel; ``dual``: its four components (v, u, y, x),
+    contiguous; ``primal_weights`` (mu times the axis weights) and ``dual_weights`` (the step times the axis
+    weights; 0 skips an axis); ``box`` None or ``(lo, hi)`` (``hi`` None: no upper bound); ``coupled``: the
+    colour TV (the norm over C too); ``blocks``: how many blocks of rows run in parallel; ``scratch``: a
+    contiguous tensor of ``v``'s shape, overwritten. See :func:`~napari_lfdeblur._fused_loops.prox_sweep`.
+    """
+    arr, ps, wp, lo, hi, one = _prox_args(v, dual, primal_weights, box)
+    Y = arr.shape[2]
+    _run("prox_sweep", arr, *ps, wp, np.asarray(dual_weights, arr.dtype), lo, hi, arr.shape[3] // v.shape[3],
+         bool(isotropic), bool(coupled), one, max(1, -(-Y // max(1, blocks))), _rows5(scratch, out=True))
+
+
+def prox_primal(v, dual, primal_weights, box, out):
+    """``out = clip(v + div(dual))``, the prox's result (arguments as :func:`prox_sweep`)."""
+    arr, ps, wp, lo, hi, _ = _prox_args(v, dual, primal_weights, box)
+    _run("prox_primal", arr, *ps, wp, lo, hi, arr.shape[3] // v.shape[3], _rows5(out, out=True))
+
+
+def tv_value(x, axis_weights, isotropic, coupled) -> float:
+    """The weighted TV4 of ``x`` (V, U, Y, X[, C]) in one parallel pass (as ``_tv_solvers.tv_value``)."""
+    arr = _rows5(x)
+    out = np.empty(arr.shape[2], np.float64)
+    _run("tv_rows", arr, np.asarray(axis_weights, arr.dtype), arr.shape[3] // x.shape[3], bool(isotropic),
+         bool(coupled), out)
+    return float(out.sum())
 
 
 class FusedTaps:

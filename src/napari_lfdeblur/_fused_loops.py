@@ -6,13 +6,14 @@ Light fields are held as rows ``(V, U, Y, X * C)``. A kernel ``K`` of shape
 ``(S, 4)`` int64 offsets ``(a, b, c, e)`` of ``(v, y, u, x)``, and ``x0s``,
 ``x1s`` the ``(S, h)`` columns ``x0:x1`` (relative to ``c0``) outside which a
 tap's weights are zero. The blurred light field holds the views ``0, step,
-2 step, ...`` along ``v`` and ``u``.
+2 step, ...`` along ``v`` and ``u``. The TV prox's loops follow (see their
+section).
 """
 
 import numba
 import numpy as np
 
-__all__ = ["forward", "adjoint", "kernel_grad"]
+__all__ = ["forward", "adjoint", "kernel_grad", "prox_sweep", "prox_primal", "tv_rows"]
 
 _jit = numba.njit(parallel=True, cache=True, fastmath={"contract", "reassoc"}, nogil=True)
 prange = numba.prange
@@ -143,3 +144,209 @@ def kernel_grad(L, G, off, r0, c0, step, C, out):
                     t += acc[(c0 + xl) * C + ch]
                 out[s, yl, xl] = t
     return out
+
+
+# ------------------------------------------------ the TV prox's dual sweep
+# The dual field is four arrays of rows (one component per axis v, u, y, x), as the light field; ``wp`` are
+# the primal's weights (mu times the axis weights), ``wd`` the dual step's (step times the axis weights, 0 for
+# an axis that is skipped). A component's last index along its axis is never written (it stays 0).
+
+
+@numba.njit(cache=True, fastmath={"contract"})
+def _primal_row(v, p0, p1, p2, p3, y, wp, lo, hi, C, xs):
+    """``xs[:, :, y] = clip(v + div(p))`` at the row ``y`` (``div`` weighted by ``wp``; ``lo > hi``: no box)."""
+    V, U, Y, XC = v.shape
+    zero = np.zeros(XC, v.dtype)
+    n = XC - C
+    for a in range(V):
+        for b in range(U):
+            o, src = xs[a, b, y], v[a, b, y]
+            v1 = p0[a, b, y] if a < V - 1 else zero
+            v0 = p0[a - 1, b, y] if a > 0 else zero
+            u1 = p1[a, b, y] if b < U - 1 else zero
+            u0 = p1[a, b - 1, y] if b > 0 else zero
+            y1 = p2[a, b, y] if y < Y - 1 else zero
+            y0 = p2[a, b, y - 1] if y > 0 else zero
+            for j in range(XC):
+                o[j] = src[j] + wp[0] * (v1[j] - v0[j]) + wp[1] * (u1[j] - u0[j]) + wp[2] * (y1[j] - y0[j])
+            if n > 0:
+                g, head, tail = p3[a, b, y], o[:n], o[C:]
+                for j in range(n):
+                    head[j] += wp[3] * g[j]
+                for j in range(n):
+                    tail[j] -= wp[3] * g[j]
+            if lo <= hi:
+                for j in range(XC):
+                    o[j] = min(max(o[j], lo), hi)
+
+
+@numba.njit(cache=True, fastmath={"contract"})
+def _dual_row(p0, p1, p2, p3, xs, y, wd, C, isotropic, coupled, one, nrm):
+    """The dual step at the row ``y`` from the primal rows ``y`` and ``y + 1`` of ``xs``, then the projection."""
+    V, U, Y, XC = p0.shape
+    n = XC - C
+    for a in range(V):
+        for b in range(U):
+            x = xs[a, b, y]
+            g0, g1, g2, g3 = p0[a, b, y], p1[a, b, y], p2[a, b, y], p3[a, b, y]
+            if a < V - 1 and wd[0] != 0:
+                nx = xs[a + 1, b, y]
+                for j in range(XC):
+                    g0[j] += wd[0] * (nx[j] - x[j])
+            if b < U - 1 and wd[1] != 0:
+                nx = xs[a, b + 1, y]
+                for j in range(XC):
+                    g1[j] += wd[1] * (nx[j] - x[j])
+            if y < Y - 1 and wd[2] != 0:
+                nx = xs[a, b, y + 1]
+                for j in range(XC):
+                    g2[j] += wd[2] * (nx[j] - x[j])
+            if n > 0 and wd[3] != 0:
+                h, nx, x0 = g3[:n], x[C:], x[:n]
+                for j in range(n):
+                    h[j] += wd[3] * (nx[j] - x0[j])
+            _project(g0, g1, g2, g3, C, isotropic, coupled, one, nrm)
+
+
+@numba.njit(cache=True, fastmath={"contract"})
+def _project(g0, g1, g2, g3, C, isotropic, coupled, one, nrm):
+    """One row of the dual onto the unit ball of the TV's dual norm (as ``priors.project_tv_dual``).
+
+    ``one`` is 1 in the rows' dtype (float64 constants would promote the arithmetic).
+    """
+    XC = g0.shape[0]
+    if not isotropic and not coupled:
+        for j in range(XC):
+            g0[j] = min(max(g0[j], -one), one)
+            g1[j] = min(max(g1[j], -one), one)
+            g2[j] = min(max(g2[j], -one), one)
+            g3[j] = min(max(g3[j], -one), one)
+        return
+    if not isotropic:  # coupled: each component's vector over the channels
+        for g in (g0, g1, g2, g3):
+            for j in range(XC):
+                nrm[j] = g[j] * g[j]
+            _channel_scales(nrm, C, one)
+            for j in range(XC):
+                g[j] *= nrm[j]
+        return
+    for j in range(XC):
+        nrm[j] = g0[j] * g0[j] + g1[j] * g1[j] + g2[j] * g2[j] + g3[j] * g3[j]
+    if coupled:
+        _channel_scales(nrm, C, one)
+    else:
+        for j in range(XC):
+            nrm[j] = one / max(np.sqrt(nrm[j]), one)
+    for j in range(XC):
+        g0[j] *= nrm[j]
+        g1[j] *= nrm[j]
+        g2[j] *= nrm[j]
+        g3[j] *= nrm[j]
+
+
+@numba.njit(cache=True, fastmath={"contract"})
+def _channel_scales(nrm, C, one):
+    """``nrm`` (squares per sample) becomes ``1 / max(|.|, 1)`` of each pixel's norm over its ``C`` channels."""
+    for j in range(0, nrm.shape[0], C):
+        s = nrm[j]
+        for c in range(1, C):
+            s += nrm[j + c]
+        s = one / max(np.sqrt(s), one)
+        for c in range(C):
+            nrm[j + c] = s
+
+
+@_jit
+def prox_sweep(v, p0, p1, p2, p3, wp, wd, lo, hi, C, isotropic, coupled, one, rows, xs):
+    """One dual gradient-projection iteration of the TV prox, in place on ``p0..p3``; ``xs`` is scratch.
+
+    The rows are cut in blocks of ``rows``; each block's first primal row is
+    computed first from the dual as it was, then every block, in parallel,
+    walks its rows: the primal of the next row (from the dual rows it owns,
+    not yet updated), then the dual step of this row. That is one Jacobi
+    iteration over the whole field, as the torch version computes it.
+    """
+    V, U, Y, XC = v.shape
+    nb = (Y + rows - 1) // rows
+    for k in prange(nb):
+        _primal_row(v, p0, p1, p2, p3, k * rows, wp, lo, hi, C, xs)
+    for k in prange(nb):
+        nrm = np.empty(XC, v.dtype)
+        y0, y1 = k * rows, min(Y, k * rows + rows)
+        for y in range(y0, y1):
+            if y + 1 < y1:
+                _primal_row(v, p0, p1, p2, p3, y + 1, wp, lo, hi, C, xs)
+            _dual_row(p0, p1, p2, p3, xs, y, wd, C, isotropic, coupled, one, nrm)
+
+
+@_jit
+def prox_primal(v, p0, p1, p2, p3, wp, lo, hi, C, out):
+    """``out = clip(v + div(p))``: the prox's result from its dual."""
+    for y in prange(v.shape[2]):
+        _primal_row(v, p0, p1, p2, p3, y, wp, lo, hi, C, out)
+
+
+@numba.njit(cache=True, fastmath={"contract"})
+def _tv_add(d, acc, isotropic, coupled, C):
+    """Adds a row of weighted differences ``d`` to the TV: squares into ``acc`` (isotropic), else the norms."""
+    if isotropic:
+        for j in range(d.shape[0]):
+            acc[j] += d[j] * d[j]
+        return 0.0
+    total = 0.0
+    if coupled:
+        for j in range(0, d.shape[0], C):
+            s = d[j] * d[j]
+            for c in range(1, C):
+                s += d[j + c] * d[j + c]
+            total += np.sqrt(s)
+        return total
+    for j in range(d.shape[0]):
+        total += abs(d[j])
+    return total
+
+
+@_jit
+def tv_rows(x, w, C, isotropic, coupled, out):
+    """``out[y]``: the TV4 of ``x`` (rows (V, U, Y, X * C)) summed over the row ``y`` (forward differences
+    weighted by ``w``; isotropic: the norm of each sample's 4-vector, over its channels too when ``coupled``)."""
+    V, U, Y, XC = x.shape
+    n = XC - C
+    for y in prange(Y):
+        acc = np.empty(XC, x.dtype)
+        d = np.empty(XC, x.dtype)
+        total = 0.0
+        for a in range(V):
+            for b in range(U):
+                row = x[a, b, y]
+                acc[:] = 0
+                for axis in range(3):
+                    if w[axis] == 0:
+                        continue
+                    if axis == 0 and a < V - 1:
+                        nxt = x[a + 1, b, y]
+                    elif axis == 1 and b < U - 1:
+                        nxt = x[a, b + 1, y]
+                    elif axis == 2 and y < Y - 1:
+                        nxt = x[a, b, y + 1]
+                    else:
+                        continue
+                    for j in range(XC):
+                        d[j] = w[axis] * (nxt[j] - row[j])
+                    total += _tv_add(d, acc, isotropic, coupled, C)
+                if n > 0 and w[3] != 0:
+                    d2, nx, r0 = d[:n], row[C:], row[:n]
+                    for j in range(n):
+                        d2[j] = w[3] * (nx[j] - r0[j])
+                    total += _tv_add(d2, acc, isotropic, coupled, C)
+                if isotropic:
+                    if coupled:
+                        for j in range(0, XC, C):
+                            s = acc[j]
+                            for c in range(1, C):
+                                s += acc[j + c]
+                            total += np.sqrt(s)
+                    else:
+                        for j in range(XC):
+                            total += np.sqrt(acc[j])
+        out[y] = total

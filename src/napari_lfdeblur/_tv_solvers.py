@@ -13,6 +13,7 @@ import math
 
 import torch
 
+from . import _fused
 from .priors import gradient_norm_bound, project_tv_dual, sum_channels_
 from .progress import check_cancelled
 
@@ -27,8 +28,12 @@ def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False) -> float:
 
     ``buffers``, two tensors of ``x``'s shape, are used as scratch space
     instead of new allocations (large fresh tensors cost page faults on every
-    use on the CPU).
+    use on the CPU). On the CPU, a (V, U, Y, X[, C]) ``x`` is summed by a
+    fused loop instead (:func:`~napari_lfdeblur._fused.tv_value`) where it
+    is available.
     """
+    if x.dim() in (4, 5) and _fused.available(x.device, x.dtype):
+        return _fused.tv_value(x, axis_weights, isotropic, coupled)
     acc, diff_buf = buffers if buffers is not None else (torch.empty_like(x), torch.empty_like(x))
     if isotropic:
         acc.zero_()
@@ -79,6 +84,13 @@ class TVProx:
     ``like``'s shape that the caller does not need during a call, are used
     for the primal and the dual norm when the block is the whole field
     (their contents are lost).
+
+    On the CPU, where the fused loops are available
+    (:func:`~napari_lfdeblur._fused.available`), an iteration is instead one
+    parallel pass of :func:`~napari_lfdeblur._fused.prox_sweep`, which
+    computes the same iteration with each row's primal, dual step and
+    projection in one loop (``rows`` is then unused; the primal needs a
+    whole-field buffer, the first of ``scratch`` when given).
     """
 
     def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch=None,
@@ -90,6 +102,10 @@ class TVProx:
         self.box = box
         self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
         self.p = [torch.zeros_like(like) for _ in range(4)]
+        self.fused = like.dim() in (4, 5) and _fused.available(like.device, like.dtype)
+        if self.fused:
+            self.x = scratch[0] if scratch is not None else torch.empty_like(like)
+            return
         Y = like.shape[2]
         if rows is None:
             row_bytes = max(1, like.narrow(2, 0, 1).numel() * like.element_size())
@@ -164,6 +180,8 @@ class TVProx:
             out.copy_(v)
             return out if self.box is None else out.clamp_(*self.box)
         step = 1.0 / (mu * self.lip)
+        if self.fused:
+            return self._fused_call(v, mu, step, out)
         for _ in range(self.n_inner):
             self._sweep(v, mu, step)
             check_cancelled()
@@ -171,6 +189,17 @@ class TVProx:
         for y0 in range(0, Y, self.rows):
             y1 = min(Y, y0 + self.rows)
             self._primal_rows(v, mu, y0, y1, out.narrow(2, y0, y1 - y0))
+        return out
+
+
+    def _fused_call(self, v, mu, step, out):
+        wp = [mu * w for w in self.aw]
+        wd = [step * w if v.shape[axis] > 1 else 0.0 for axis, w in enumerate(self.aw)]
+        blocks = 4 * torch.get_num_threads()
+        for _ in range(self.n_inner):
+            _fused.prox_sweep(v, self.p, wp, wd, self.box, self.isotropic, self.coupled, blocks, self.x)
+            check_cancelled()
+        _fused.prox_primal(v, self.p, wp, self.box, out)
         return out
 
 
