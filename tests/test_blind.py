@@ -620,7 +620,7 @@ def test_shear_resamples_each_view_bilinearly_at_its_refocused_coordinates():
                     np.testing.assert_allclose(out[v, u, :, :, c], ref, rtol=0, atol=1e-12)
 
 
-def test_disparity_map_finds_the_disparity_of_each_half():
+def test_disparity_map_finds_the_disparity_of_each_half(engine):
     # left half: a noise texture at d = +1 px/view; right half: another at d = -2 (exact integer shifts)
     Y, X = 32, 48
     lf = _two_disparity_halves(Y, X, 1, -2, seed=0)
@@ -631,6 +631,20 @@ def test_disparity_map_finds_the_disparity_of_each_half():
     m = 2 * 2 + 2  # the smoothing window and the largest shift of a view
     np.testing.assert_allclose(d[m:-m, m : X // 2 - m], 1.0, atol=0.13)
     np.testing.assert_allclose(d[m:-m, X // 2 + m : -m], -2.0, atol=0.13)
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_fused_view_variance_is_the_variance_of_the_refocused_views(dtype):
+    from napari_lfdeblur import _fused
+
+    if not _fused.available("cpu"):
+        pytest.skip("numba is not installed")
+    f = torch.as_tensor(np.random.default_rng(2).random((3, 5, 7, 9, 1)).astype(dtype))
+    shears = [-2.3, -0.5, 0.0, 0.7, 4.0]  # 4 px/view reads far past the edges
+    got = _fused.view_variance(f, shears)
+    want = torch.stack([_disparity.shear(f, d).var(dim=(0, 1))[..., 0] for d in shears])
+    assert got.dtype == f.dtype and got.shape == (5, 7, 9)
+    torch.testing.assert_close(got, want, rtol=1e-5 if dtype == "float32" else 1e-12, atol=0)
 
 
 def test_sparse_gradient_prior_matches_definition():
@@ -704,7 +718,7 @@ def test_edge_blurred_operator_is_adjoint_and_commutes():
     np.testing.assert_allclose(one[:, :, 3:-3, 3:-3], 1.0, atol=1e-12)
 
 
-def test_warm_started_latent_takes_the_last_splitting_steps_and_keeps_a_converged_latent():
+def test_warm_started_latent_takes_the_last_splitting_steps_and_keeps_a_converged_latent(engine):
     from napari_lfdeblur.samples import synthetic_scene
 
     lf, _ = synthetic_scene((3, 3, 24, 24), seed=2)

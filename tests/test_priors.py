@@ -188,6 +188,20 @@ def test_spatial_gradient_is_the_yx_part_of_gradient4d_and_its_divergence_the_ad
         gradient_yx(np.zeros((2, 2, 3, 3)))
 
 
+@pytest.mark.parametrize("shape", [(3, 4, 6, 5, 2), (2, 3, 4, 5), (1, 3, 1, 4, 3)])
+@pytest.mark.parametrize("weights", [(1.0, 1.0, 1.0, 1.0), (0.5, 0.25, 1.0, 2.0), (0.0, 0.0, 1.0, 1.0)])
+def test_fused_laplacian_step_is_a_plus_scaled_minus_div_grad(shape, weights):
+    from napari_lfdeblur import _fused
+
+    if not _fused.available("cpu"):
+        pytest.skip("numba is not installed")
+    rng = np.random.default_rng(6)
+    a, z = (torch.as_tensor(rng.random(shape)) for _ in range(2))
+    ref = a - 0.7 * divergence4d(gradient4d(z, weights), weights)
+    got = _fused.add_laplacian(a, z, weights, 0.7)
+    np.testing.assert_allclose(got.numpy(), ref.numpy(), atol=1e-12)
+
+
 def test_sparse_gradient_prior_rejects_a_non_positive_eps():
     from napari_lfdeblur.priors import sparse_gradient_prior
 

@@ -1,4 +1,4 @@
-"""The tap blur (its adjoint, its kernel gradient) and the 4D-TV prox's inner iteration as fused CPU loops (numba).
+"""Fused CPU loops (numba): the tap blur with its adjoint and kernel gradient, the 4D-TV prox, two blind steps.
 
 A tap kernel is ``S`` weight maps ``K[s]`` of shape ``(Y, X)`` with integer
 offsets ``(a, b, c, e)`` of ``(v, y, u, x)``::
@@ -22,7 +22,10 @@ the edge, as the model's replicate boundary does.
 The TV prox's dual gradient projection (:func:`prox_sweep`,
 :func:`prox_primal`) and the TV's value (:func:`tv_value`) are such loops
 too, for :class:`~napari_lfdeblur._tv_solvers.TVProx`: each sample of the
-dual is read and written once per iteration.
+dual is read and written once per iteration. So are, for the blind solver,
+the variance of the refocused views behind its disparity maps
+(:func:`view_variance`) and the Laplacian step of its salient-edge latent
+(:func:`add_laplacian`).
 
 Used on the CPU when numba imports (a warning, once, says when it does not);
 ``NAPARI_LFDEBLUR_NUMBA=0`` turns it off (then the torch versions run). The
@@ -40,7 +43,7 @@ import numpy as np
 import torch
 
 __all__ = ["available", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad", "FusedTaps", "prox_sweep",
-           "prox_primal", "tv_value"]
+           "prox_primal", "tv_value", "view_variance", "add_laplacian"]
 
 _LOCK = threading.Lock()  # numba's default thread pool runs one parallel loop at a time
 
@@ -158,6 +161,43 @@ def tv_value(x, axis_weights, isotropic, coupled) -> float:
     _run("tv_rows", arr, np.asarray(axis_weights, arr.dtype), arr.shape[3] // x.shape[3], bool(isotropic),
          bool(coupled), out)
     return float(out.sum())
+
+
+def view_variance(f, shears) -> torch.Tensor:
+    """(n, Y, X): the variance over the views of ``f`` (V, U, Y, X, 1) refocused by each of the ``n`` ``shears``.
+
+    The refocus is ``blind._disparity.shear``'s (its taps are made here the
+    same way), in one parallel pass over the rows for all shears.
+    """
+    from .blur import lerp_taps
+
+    V, U, Y, X, _ = f.shape
+    arr = rows(f)
+    n, dt = len(shears), arr.dtype
+    y0, y1, x0, x1 = (np.empty(s, np.int64) for s in ((n, V, Y), (n, V, Y), (n, U, X), (n, U, X)))
+    wy, wx = np.empty((n, V, Y), dt), np.empty((n, U, X), dt)
+    ys, xs = torch.arange(Y, dtype=f.dtype), torch.arange(X, dtype=f.dtype)
+    for k, d in enumerate(shears):
+        for v in range(V):
+            y0[k, v], y1[k, v], wy[k, v] = (t.numpy() for t in lerp_taps(ys + d * (v - (V - 1) / 2.0), Y))
+        shift = torch.tensor([d * (u - (U - 1) / 2.0) for u in range(U)], dtype=f.dtype)
+        x0[k], x1[k], wx[k] = (t.numpy() for t in lerp_taps(xs[None, :] + shift[:, None], X))
+    out = np.empty((n, Y, X), dt)
+    _run("view_variance", arr, y0, y1, 1 - wy, wy, x0, x1, 1 - wx, wx, out)
+    return torch.from_numpy(out)
+
+
+def add_laplacian(a, z, axis_weights, scale):
+    """``a + scale * priors.laplacian4d(z, axis_weights)`` in one pass, as a new tensor.
+
+    ``a`` and ``z`` are (V, U, Y, X) or (V, U, Y, X, C), of one shape.
+    """
+    out = torch.empty(z.shape, dtype=z.dtype)
+    arr = _rows5(z)
+    w2 = np.asarray([w * w for w in axis_weights], arr.dtype)
+    _run("add_laplacian", _rows5(a.to(z.dtype)), arr, w2, arr.dtype.type(scale), arr.shape[3] // z.shape[3],
+         _rows5(out, out=True))
+    return out
 
 
 class FusedTaps:

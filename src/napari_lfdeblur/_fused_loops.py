@@ -13,7 +13,8 @@ section).
 import numba
 import numpy as np
 
-__all__ = ["forward", "adjoint", "kernel_grad", "prox_sweep", "prox_primal", "tv_rows"]
+__all__ = ["forward", "adjoint", "kernel_grad", "prox_sweep", "prox_primal", "tv_rows", "view_variance",
+           "add_laplacian"]
 
 _jit = numba.njit(parallel=True, cache=True, fastmath={"contract", "reassoc"}, nogil=True)
 prange = numba.prange
@@ -350,3 +351,93 @@ def tv_rows(x, w, C, isotropic, coupled, out):
                         for j in range(XC):
                             total += np.sqrt(acc[j])
         out[y] = total
+
+
+# ------------------------------------------------ refocused views' variance (disparity maps)
+
+
+@numba.njit(cache=True, parallel=True, nogil=True)
+def view_variance(f, y0, y1, wy0, wy1, x0, x1, wx0, wx1, out):
+    """``out[k, y, x]``: the variance over the views of ``f`` (V, U, Y, X) resampled by the ``k``-th shear.
+
+    The shear's bilinear taps are given per view row and column: ``y0, y1``
+    and the weights ``wy0, wy1`` (n, V, Y), ``x0, x1, wx0, wx1`` (n, U, X), as
+    ``blur.lerp_taps`` makes them (``wy0 = 1 - wy1``); a view is interpolated
+    along ``y`` first, then along ``x``, as ``blind._disparity.shear`` does,
+    and the variance is the unbiased one (two passes: the mean, then the
+    squared deviations). No fused multiply-adds, so the resampled values are
+    those of the torch version.
+    """
+    n, V, Y = wy0.shape
+    U, X = wx0.shape[1], wx0.shape[2]
+    m = V * U
+    for y in prange(Y):
+        vals = np.empty((m, X), f.dtype)
+        mean = np.empty(X, f.dtype)
+        acc = np.empty(X, f.dtype)
+        for k in range(n):
+            for v in range(V):
+                a, b, w0, w1 = y0[k, v, y], y1[k, v, y], wy0[k, v, y], wy1[k, v, y]
+                for u in range(U):
+                    ra, rb, val = f[v, u, a], f[v, u, b], vals[v * U + u]
+                    c0, c1, cw0, cw1 = x0[k, u], x1[k, u], wx0[k, u], wx1[k, u]
+                    for x in range(X):
+                        lo = ra[c0[x]] * w0 + rb[c0[x]] * w1
+                        hi = ra[c1[x]] * w0 + rb[c1[x]] * w1
+                        val[x] = lo * cw0[x] + hi * cw1[x]
+            # deviations from the first view's value: equal values give exactly 0, as torch's variance does
+            first = vals[0]
+            mean[:] = 0
+            for i in range(1, m):
+                row = vals[i]
+                for x in range(X):
+                    mean[x] += row[x] - first[x]
+            for x in range(X):
+                mean[x] = first[x] + mean[x] / m
+            acc[:] = 0
+            for i in range(m):
+                row = vals[i]
+                for x in range(X):
+                    e = row[x] - mean[x]
+                    acc[x] += e * e
+            for x in range(X):
+                out[k, y, x] = acc[x] / max(m - 1, 1)
+
+
+@_jit
+def add_laplacian(a, z, w2, scale, C, out):
+    """``out = a + scale * D^T W^2 D z``: the weighted 4D Laplacian of ``z`` (Neumann), rows (V, U, Y, X * C).
+
+    ``w2`` holds the squared axis weights (0 skips an axis), as ``priors.laplacian4d``.
+    """
+    V, U, Y, XC = z.shape
+    n = XC - C
+    for y in prange(Y):
+        t = np.empty(XC, z.dtype)
+        for v in range(V):
+            for u in range(U):
+                zr = z[v, u, y]
+                t[:] = 0
+                for axis in range(3):
+                    if w2[axis] == 0:
+                        continue
+                    for side in (-1, 1):
+                        if axis == 0 and 0 <= v + side < V:
+                            nb = z[v + side, u, y]
+                        elif axis == 1 and 0 <= u + side < U:
+                            nb = z[v, u + side, y]
+                        elif axis == 2 and 0 <= y + side < Y:
+                            nb = z[v, u, y + side]
+                        else:
+                            continue
+                        for j in range(XC):
+                            t[j] += w2[axis] * (zr[j] - nb[j])
+                if n > 0 and w2[3] != 0:
+                    head, tail, z0, z1 = t[:n], t[C:], zr[:n], zr[C:]
+                    for j in range(n):
+                        head[j] += w2[3] * (z0[j] - z1[j])
+                    for j in range(n):
+                        tail[j] += w2[3] * (z1[j] - z0[j])
+                o, ar = out[v, u, y], a[v, u, y]
+                for j in range(XC):
+                    o[j] = ar[j] + scale * t[j]

@@ -11,6 +11,7 @@ import math
 import numpy as np
 import torch
 
+from .. import _fused
 from ..blur import lerp_taps
 
 __all__ = ["gray", "shear", "downsample", "disparity_map", "disparity_weights", "DISPARITY_PIXELS",
@@ -81,8 +82,10 @@ def disparity_map(f: torch.Tensor, d_max: float = 2.5, n: int = 41, smooth: int 
     """
     best = torch.full(f.shape[2:4], math.inf, dtype=f.dtype, device=f.device)
     arg = torch.zeros_like(best)
-    for d in np.linspace(-d_max, d_max, n):
-        var = shear(f, float(d)).var(dim=(0, 1))[..., 0]  # (Y, X)
+    shears = [float(d) for d in np.linspace(-d_max, d_max, n)]
+    fused = _fused.view_variance(f, shears) if _fused.available(f.device, f.dtype) else None
+    for k, d in enumerate(shears):
+        var = fused[k] if fused is not None else shear(f, d).var(dim=(0, 1))[..., 0]  # (Y, X)
         var = torch.nn.functional.avg_pool2d(var[None, None], 2 * smooth + 1, stride=1, padding=smooth,
                                              count_include_pad=False)[0, 0]
         better = var < best

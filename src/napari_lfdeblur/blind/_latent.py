@@ -15,6 +15,7 @@ import math
 import numpy as np
 import torch
 
+from .. import _fused
 from ..blur import BlurOperator
 from ..priors import divergence4d, divergence_yx, gradient4d, gradient_yx, laplacian4d
 from ._params import LatentParams
@@ -104,6 +105,7 @@ def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0
     grad, div = difference_pair(p.angular_weight)
     # div(grad(.)) of the quadratic step without the gradient components: -laplacian4d
     lap_weights = _axis_weights(p.angular_weight)
+    fused = f.dim() in (4, 5) and _fused.available(f.device, f.dtype)
     Ktf = op.adjoint(f)
     x = x0
     beta = _first_beta(lam, p, last)
@@ -115,6 +117,8 @@ def l0_latent(op: BlurOperator, f: torch.Tensor, lam: float, p: LatentParams, x0
         rhs = Ktf - beta * div(g)
 
         def apply_A(z, beta=beta):
+            if fused:
+                return _fused.add_laplacian(op.adjoint(op.forward(z)), z, lap_weights, beta)
             return torch.add(op.adjoint(op.forward(z)), laplacian4d(z, lap_weights), alpha=beta)
 
         x = yield from cg(apply_A, rhs, x, p.n_cg)
