@@ -191,8 +191,8 @@ class TVProx:
             self._primal_rows(v, mu, y0, y1, out.narrow(2, y0, y1 - y0))
         return out
 
-
     def _fused_call(self, v, mu, step, out):
+        """The iterations and the result by the fused loops (:func:`~napari_lfdeblur._fused.prox_sweep`)."""
         wp = [mu * w for w in self.aw]
         wd = [step * w if v.shape[axis] > 1 else 0.0 for axis, w in enumerate(self.aw)]
         blocks = 4 * torch.get_num_threads()
