@@ -287,6 +287,17 @@ def prox_primal(v, p0, p1, p2, p3, wp, lo, hi, C, out):
         _primal_row(v, p0, p1, p2, p3, y, wp, lo, hi, C, out)
 
 
+@numba.njit(cache=True)
+def _step(a, b, y, axis, side, V, U, Y):
+    """``(a, b, y)`` moved by ``side`` along ``axis`` (0: v, 1: u, 2: y), and whether it stays in the field."""
+    a, b, y = np.int64(a), np.int64(b), np.int64(y)  # a parallel loop's index may be unsigned
+    if axis == 0:
+        return a + side, b, y, 0 <= a + side < V
+    if axis == 1:
+        return a, b + side, y, 0 <= b + side < U
+    return a, b, y + side, 0 <= y + side < Y
+
+
 @numba.njit(cache=True, fastmath={"contract"})
 def _tv_add(d, acc, isotropic, coupled, C):
     """Adds a row of weighted differences ``d`` to the TV: squares into ``acc`` (isotropic), else the norms."""
@@ -322,16 +333,10 @@ def tv_rows(x, w, C, isotropic, coupled, out):
                 row = x[a, b, y]
                 acc[:] = 0
                 for axis in range(3):
-                    if w[axis] == 0:
+                    na, nb, ny, inside = _step(a, b, y, axis, 1, V, U, Y)
+                    if w[axis] == 0 or not inside:
                         continue
-                    if axis == 0 and a < V - 1:
-                        nxt = x[a + 1, b, y]
-                    elif axis == 1 and b < U - 1:
-                        nxt = x[a, b + 1, y]
-                    elif axis == 2 and y < Y - 1:
-                        nxt = x[a, b, y + 1]
-                    else:
-                        continue
+                    nxt = x[na, nb, ny]
                     for j in range(XC):
                         d[j] = w[axis] * (nxt[j] - row[j])
                     total += _tv_add(d, acc, isotropic, coupled, C)
@@ -419,17 +424,11 @@ def add_laplacian(a, z, w2, scale, C, out):
                 zr = z[v, u, y]
                 t[:] = 0
                 for axis in range(3):
-                    if w2[axis] == 0:
-                        continue
                     for side in (-1, 1):
-                        if axis == 0 and 0 <= v + side < V:
-                            nb = z[v + side, u, y]
-                        elif axis == 1 and 0 <= u + side < U:
-                            nb = z[v, u + side, y]
-                        elif axis == 2 and 0 <= y + side < Y:
-                            nb = z[v, u, y + side]
-                        else:
+                        nv, nu, ny, inside = _step(v, u, y, axis, side, V, U, Y)
+                        if w2[axis] == 0 or not inside:
                             continue
+                        nb = z[nv, nu, ny]
                         for j in range(XC):
                             t[j] += w2[axis] * (zr[j] - nb[j])
                 if n > 0 and w2[3] != 0:
