@@ -76,13 +76,19 @@ def _run(name, *args):
         getattr(_loops(), name)(*args)
 
 
+def _check_writable(t: torch.Tensor) -> None:
+    """The loops write into ``t`` through numpy: it must be contiguous (a copy would lose what they write)."""
+    if not t.is_contiguous():
+        raise ValueError("the fused loops write into contiguous tensors only")
+
+
 def rows(t: torch.Tensor, out: bool = False) -> np.ndarray:
     """``t`` (V, U, Y, X, C) as a numpy array of rows (V, U, Y, X * C), sharing its memory where contiguous.
 
     An ``out`` tensor, which the loops write, must be contiguous (a copy would lose what they write).
     """
-    if out and not t.is_contiguous():
-        raise ValueError("the fused loops write into contiguous tensors only")
+    if out:
+        _check_writable(t)
     V, U, Y, X, C = t.shape
     return t.detach().contiguous().numpy().reshape(V, U, Y, X * C)
 
@@ -115,8 +121,7 @@ def add_adjoint(G, K, offsets, spans, out, origin=(0, 0), view_step=1):
 
 def kernel_grad(L, G, offsets, out, origin=(0, 0), view_step=1):
     """Writes ``d<G, forward(L)>/dK`` into ``out`` (S, h, w), contiguous, of ``G``'s dtype."""
-    if not out.is_contiguous():
-        raise ValueError("the fused loops write into contiguous tensors only")
+    _check_writable(out)
     _run("kernel_grad", rows(L.to(G.dtype)), rows(G), offsets, *origin, view_step, G.shape[4], out.numpy())
 
 
@@ -163,26 +168,15 @@ def tv_value(x, axis_weights, isotropic, coupled) -> float:
     return float(out.sum())
 
 
-def view_variance(f, shears) -> torch.Tensor:
-    """(n, Y, X): the variance over the views of ``f`` (V, U, Y, X, 1) refocused by each of the ``n`` ``shears``.
+def view_variance(f, y0, y1, wy, x0, x1, wx) -> torch.Tensor:
+    """(n, Y, X): the variance over the views of ``f`` (V, U, Y, X, 1) resampled by ``n`` shears, in one pass.
 
-    The refocus is ``blind._disparity.shear``'s (its taps are made here the
-    same way), in one parallel pass over the rows for all shears.
+    The shears' bilinear taps are numpy arrays: ``y0, y1`` (int64) and
+    ``wy`` of shape (n, V, Y), ``x0, x1, wx`` of shape (n, U, X), as
+    ``blind._disparity.shear_taps`` makes them (``wy`` and ``wx`` in ``f``'s dtype).
     """
-    from .blur import lerp_taps
-
-    V, U, Y, X, _ = f.shape
     arr = rows(f)
-    n, dt = len(shears), arr.dtype
-    y0, y1, x0, x1 = (np.empty(s, np.int64) for s in ((n, V, Y), (n, V, Y), (n, U, X), (n, U, X)))
-    wy, wx = np.empty((n, V, Y), dt), np.empty((n, U, X), dt)
-    ys, xs = torch.arange(Y, dtype=f.dtype), torch.arange(X, dtype=f.dtype)
-    for k, d in enumerate(shears):
-        for v in range(V):
-            y0[k, v], y1[k, v], wy[k, v] = (t.numpy() for t in lerp_taps(ys + d * (v - (V - 1) / 2.0), Y))
-        shift = torch.tensor([d * (u - (U - 1) / 2.0) for u in range(U)], dtype=f.dtype)
-        x0[k], x1[k], wx[k] = (t.numpy() for t in lerp_taps(xs[None, :] + shift[:, None], X))
-    out = np.empty((n, Y, X), dt)
+    out = np.empty((wy.shape[0], f.shape[2], f.shape[3]), arr.dtype)
     _run("view_variance", arr, y0, y1, 1 - wy, wy, x0, x1, 1 - wx, wx, out)
     return torch.from_numpy(out)
 
