@@ -22,11 +22,16 @@ def notifications(monkeypatch):
 
 @pytest.fixture(params=["fused", "torch"])
 def engine(request, monkeypatch):
-    """Runs a test with the blur's fused CPU loops (numba) and again with its torch version."""
-    from napari_lfdeblur import _fused
+    """Runs a test with the blur's fused CPU loops (numba) and again with its torch version.
+
+    The fused loops' tiles of a rotation's kernel are 16 px here (128 by default), so that the small light
+    fields of the tests span several tiles with either version.
+    """
+    from napari_lfdeblur import _fused, _taps_tiled
 
     if request.param == "fused" and not _fused.available("cpu"):
         pytest.skip("numba is not installed")
+    monkeypatch.setattr(_taps_tiled, "FUSED_TILE_SIDE", 16)
     if request.param == "torch":
         monkeypatch.setattr(_fused, "available", lambda *args: False)
     return request.param

@@ -30,7 +30,7 @@ from . import _fused
 from ._taps import fold
 from ._taps4d import axis_taps
 
-__all__ = ["rotation_displacement", "tiled_kernel", "TiledTaps", "tile_side"]
+__all__ = ["rotation_displacement", "tiled_kernel", "TiledTaps", "tile_side", "FUSED_TILE_SIDE"]
 
 _CORNERS = list(itertools.product((0, 1), repeat=4))
 
@@ -63,8 +63,25 @@ def rotation_displacement(rotations: torch.Tensor, xt: torch.Tensor, yt: torch.T
     return t_y, t_x
 
 
-def tile_side(shape, block_elements: int) -> int:
-    """Side of the square tiles: about ``block_elements`` padded elements each, 16 to 64 px."""
+#: Side of the tiles the fused CPU loops apply, px (see :func:`tile_side`).
+FUSED_TILE_SIDE = 128
+
+
+def tile_side(shape, block_elements: int, fused: bool = False) -> int:
+    """Side of the square tiles, px.
+
+    The torch version copies each tile, padded, for all views at once, so its
+    tiles hold about ``block_elements`` padded elements each, 16 to 64 px.
+    The fused loops (``fused``) copy nothing: each tap of a tile is one loop
+    along the part of each row where it weighs, and the setup of such a loop
+    costs as much as a few dozen multiply-adds. Their tiles are
+    :data:`FUSED_TILE_SIDE` px: longer rows share that setup among more
+    pixels, while the taps a tile holds grow with the spread of the
+    rotation's displacement over it. The tiling changes the order in which
+    the adjoint adds up, not the forward's sums.
+    """
+    if fused:
+        return FUSED_TILE_SIDE
     V, U, _, _, C = shape
     side = math.isqrt(max(1, block_elements // max(1, (V + 2) * (U + 2) * C)))
     return int(min(64, max(16, side)))
