@@ -151,6 +151,39 @@ def test_tiled_kernel_gradient_matches_finite_differences(views):
     assert torch.autograd.gradcheck(kernel, (s_v, s_u, t_y, t_x), eps=1e-7, atol=1e-6, fast_mode=True)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_fused_kernel_build_and_gradient_equal_the_torch_version(dtype):
+    # the loops add and multiply in the torch version's order: kernels, offsets, spans and shift gradients
+    # agree to the bit, over several tiles, shifts beyond the clamped range and a single-view axis
+    from napari_lfdeblur import _fused
+    from napari_lfdeblur._taps_tiled import tiled_kernel
+
+    if not _fused.available("cpu", dtype):
+        pytest.skip("numba is not installed")
+    for V, U in ((5, 6), (1, 4)):
+        g = torch.Generator().manual_seed(V)
+        Y, X, T = 37, 45, 5
+        shifts = [torch.rand(size, generator=g, dtype=dtype) * 6 - 3 for size in ((T, Y), (T, X))]
+        shifts += [torch.rand(T, Y, X, generator=g, dtype=dtype) * 5 - 2.5 for _ in range(2)]
+        out = []
+        for fused in (False, True):
+            leaves = [t.clone().requires_grad_(True) for t in shifts]
+            K, layout = tiled_kernel(*leaves, (V, U, Y, X, 1), 16, fused)
+            weights = torch.rand(K.shape, generator=torch.Generator().manual_seed(1), dtype=dtype)
+            (K * weights).sum().backward()
+            out.append((K.detach(), [t.grad for t in leaves], layout))
+        (K0, grads0, layout0), (K1, grads1, layout1) = out
+        assert len(layout1) == 9 and torch.equal(K0, K1)
+        for a, b in zip(grads0, grads1):
+            assert torch.equal(a, b)
+        for (r0, c0, s0, off0, none), (r1, c1, s1, off1, spans) in zip(layout0, layout1):
+            assert none is None and (r0, c0, s0) == (r1, c1, s1) and torch.equal(off0, off1)
+            h, w = r1.stop - r1.start, c1.stop - c1.start
+            Kt = K1[s1 : s1 + len(off1) * h * w].view(len(off1), h, w)
+            for a, b in zip(spans, _fused.column_spans(Kt)):
+                np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize("side", [16, 23, 128])
 def test_the_tiling_leaves_the_forward_bit_identical(side, monkeypatch):
     # each pixel sums the same taps in the same order whatever tile holds it; the adjoint gathers the

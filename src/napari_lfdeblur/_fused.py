@@ -25,7 +25,9 @@ too, for :class:`~napari_lfdeblur._tv_solvers.TVProx`: each sample of the
 dual is read and written once per iteration. So are, for the blind solver,
 the variance of the refocused views behind its disparity maps
 (:func:`view_variance`) and the Laplacian step of its salient-edge latent
-(:func:`add_laplacian`).
+(:func:`add_laplacian`), and, for a path with rotation, the build of its
+tile kernels and their gradient in the shifts (:func:`tile_accumulate`,
+:func:`tile_shift_grads`).
 
 Used on the CPU when numba imports (a warning, once, says when it does not);
 ``NAPARI_LFDEBLUR_NUMBA=0`` turns it off (then the torch versions run). The
@@ -43,7 +45,7 @@ import numpy as np
 import torch
 
 __all__ = ["available", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad", "FusedTaps", "prox_sweep",
-           "prox_primal", "tv_value", "view_variance", "add_laplacian"]
+           "prox_primal", "tv_value", "view_variance", "add_laplacian", "tile_accumulate", "tile_shift_grads"]
 
 _LOCK = threading.Lock()  # numba's default thread pool runs one parallel loop at a time
 
@@ -123,6 +125,39 @@ def kernel_grad(L, G, offsets, out, origin=(0, 0), view_step=1):
     """Writes ``d<G, forward(L)>/dK`` into ``out`` (S, h, w), contiguous, of ``G``'s dtype."""
     _check_writable(out)
     _run("kernel_grad", rows(L.to(G.dtype)), rows(G), offsets, *origin, view_step, G.shape[4], out.numpy())
+
+
+def tile_accumulate(base, slot, delta, pairs, n_taps):
+    """The sums of a rotation's tile kernel (not yet divided by ``T``) and its column spans.
+
+    ``base`` (int32, (T, h, w)), ``slot`` and ``delta`` (int64) as
+    ``_taps_tiled._tile_kernel`` makes them; ``pairs``: ``(1 - f, f)`` of the
+    fractions along ``v, y, u, x``, of shapes (2, T, h, 1), (2, T, h, w),
+    (2, T, 1, w), (2, T, h, w). Returns ``K`` (n_taps, h, w), in the pairs'
+    dtype, and ``(x0, x1)`` as :func:`column_spans`.
+    """
+    _, h, w = base.shape
+    K = torch.zeros((n_taps, h, w), dtype=pairs[1].dtype)
+    spans = tuple(np.empty((n_taps, h), np.int64) for _ in range(2))
+    pairs = (pairs[0][..., 0], pairs[1], pairs[2][:, :, 0], pairs[3])  # v per row, u per column
+    pv, py, pu, px = (t.detach().contiguous().numpy() for t in pairs)
+    _run("tile_accumulate", base.contiguous().numpy(), slot.numpy(), delta.numpy(), pv, py, pu, px, K.numpy(), *spans)
+    return K, spans
+
+
+def tile_shift_grads(gK, base, slot, delta, fracs):
+    """The derivatives of ``<gK, K>`` in each lookup's fractions along ``v, y, u, x``, each (T, h, w).
+
+    ``gK`` (S, h, w) is a tile's kernel gradient (divided by ``T``);
+    ``fracs`` the fractions of shapes (T, h), (T, h, w), (T, w), (T, h, w);
+    the rest as :func:`tile_accumulate`.
+    """
+    gK = gK.detach().contiguous()
+    out = [torch.empty(base.shape, dtype=gK.dtype) for _ in range(4)]
+    f = [t.detach().to(gK.dtype).contiguous().numpy() for t in fracs]
+    _run("tile_shift_grads", gK.numpy(), base.contiguous().numpy(), slot.numpy(), delta.numpy(), *f,
+         *(t.numpy() for t in out))
+    return out
 
 
 def _rows5(t, out=False):

@@ -13,8 +13,10 @@ section).
 import numba
 import numpy as np
 
+from ._kernel_loops import tile_accumulate, tile_shift_grads
+
 __all__ = ["forward", "adjoint", "kernel_grad", "prox_sweep", "prox_primal", "tv_rows", "view_variance",
-           "add_laplacian"]
+           "add_laplacian", "tile_accumulate", "tile_shift_grads"]
 
 _jit = numba.njit(parallel=True, cache=True, fastmath={"contract", "reassoc"}, nogil=True)
 prange = numba.prange

@@ -117,13 +117,16 @@ def _corner_weights(fracs):
     return w
 
 
-def _tile_kernel(shifts, sizes, n_times):
+def _tile_kernel(shifts, sizes, n_times, fused=False):
     """The kernel of one tile from its per-instant shifts along (v, y, u, x).
 
     ``shifts`` are broadcastable to ``(T, h, w)``. Returns ``K (S, h, w)``,
-    the ``(S, 4)`` integer offsets of its taps and, for its gradient,
-    where each of the 16 corners of each lookup lands in ``K`` (int32,
-    ``(16, T, h, w)``).
+    the ``(S, 4)`` integer offsets of its taps, what its gradient needs to
+    find where each of the 16 corners of each lookup lands in ``K`` (the
+    int32 index ``(16, T, h, w)``; with ``fused``, the lowest corners'
+    codes, the code-to-tap map and the corners' code offsets, from which
+    the loops of :mod:`~napari_lfdeblur._fused` find it), and, with
+    ``fused``, the column spans of the taps (:func:`~napari_lfdeblur._fused.column_spans`).
     """
     base, delta, fracs, lo, width = _lookups(shifts, sizes)
     h, w = base.shape[1:]
@@ -136,16 +139,22 @@ def _tile_kernel(shifts, sizes, n_times):
     for d in delta:
         used[d:] |= lowest[: n - d]
     active = used.nonzero().squeeze(1)
-    slot = (torch.cumsum(used, 0, dtype=torch.int32) - 1) * (h * w)
-    pix = torch.arange(h * w, dtype=torch.int32, device=base.device).view(1, h, w)
-    index = torch.stack([slot[d:][base] + pix for d in delta])
-    weights = _corner_weights(fracs)
-    K = weights.new_zeros(len(active) * h * w).index_add_(0, index.view(-1), weights.reshape(-1)) / n_times
     offsets = []
     for m, wd in zip(lo[::-1], width[::-1]):
         offsets.append(active % wd + m)
         active = active // wd
-    return K.view(-1, h, w), torch.stack(offsets[::-1], dim=1), index
+    offsets = torch.stack(offsets[::-1], dim=1)
+    if fused:
+        where = (base, torch.cumsum(used, 0) - 1, torch.tensor(delta, dtype=torch.int64))
+        pairs = [torch.stack(torch.broadcast_tensors(1.0 - f, f)) for f in fracs]
+        K, spans = _fused.tile_accumulate(*where, pairs, len(offsets))
+        return K / n_times, offsets, where, spans
+    slot = (torch.cumsum(used, 0, dtype=torch.int32) - 1) * (h * w)
+    pix = torch.arange(h * w, dtype=torch.int32, device=base.device).view(1, h, w)
+    index = torch.stack([slot[d:][base] + pix for d in delta])
+    weights = _corner_weights(fracs)
+    K = weights.new_zeros(len(offsets) * h * w).index_add_(0, index.view(-1), weights.reshape(-1)) / n_times
+    return K.view(-1, h, w), offsets, index, None
 
 
 def _contract(g, f):
@@ -166,15 +175,18 @@ def _tile_shift_grads(gK, shifts, sizes, index):
     (:func:`axis_taps`).
     """
     fv, fy, fu, fx = (axis_taps(s, n)[1] for s, n in zip(shifts, sizes))
-    g = gK.reshape(-1)[index].view((2, 2, 2, 2) + index.shape[1:])  # (v, y, u, x) corners
-    g, dx = _contract(g.movedim(3, 0), fx)  # (v, y, u) corners each
-    g, du = _contract(g.movedim(2, 0), fu)
-    dx, _ = _contract(dx.movedim(2, 0), fu)
-    g, dy = _contract(g.movedim(1, 0), fy)
-    du, _ = _contract(du.movedim(1, 0), fy)
-    dx, _ = _contract(dx.movedim(1, 0), fy)
-    dv = g[1] - g[0]
-    dy, du, dx = (_contract(t, fv)[0] for t in (dy, du, dx))
+    if isinstance(index, tuple):  # the fused loops' (base, slot, delta)
+        dv, dy, du, dx = _fused.tile_shift_grads(gK, *index, (fv[:, :, 0], fy, fu[:, 0], fx))
+    else:
+        g = gK.reshape(-1)[index].view((2, 2, 2, 2) + index.shape[1:])  # (v, y, u, x) corners
+        g, dx = _contract(g.movedim(3, 0), fx)  # (v, y, u) corners each
+        g, du = _contract(g.movedim(2, 0), fu)
+        dx, _ = _contract(dx.movedim(2, 0), fu)
+        g, dy = _contract(g.movedim(1, 0), fy)
+        du, _ = _contract(du.movedim(1, 0), fy)
+        dx, _ = _contract(dx.movedim(1, 0), fy)
+        dv = g[1] - g[0]
+        dy, du, dx = (_contract(t, fv)[0] for t in (dy, du, dx))
     grads = []
     for d, s, n in zip((dv, dy, du, dx), shifts, sizes):
         lim = n - 1.0
@@ -190,11 +202,12 @@ class _TiledKernel(torch.autograd.Function):
     landed in the kernel (int32); the backward pass recomputes the
     fractions and gathers the kernel's gradient there. Autograd's own
     record of the 16 weights of every lookup, and of the products that make
-    them, is many times the light field's size on a whole view.
+    them, is many times the light field's size on a whole view. With
+    ``fused`` both passes run the loops of :mod:`~napari_lfdeblur._fused`.
     """
 
     @staticmethod
-    def forward(ctx, s_v, s_u, t_y, t_x, shape, side, layout):
+    def forward(ctx, s_v, s_u, t_y, t_x, shape, side, layout, fused):
         V, U, Y, X = shape[:4]
         T = s_v.shape[0]
         parts, tiles, start = [], [], 0
@@ -203,9 +216,9 @@ class _TiledKernel(torch.autograd.Function):
             for x0 in range(0, X, side):
                 cols = slice(x0, min(X, x0 + side))
                 shifts = (s_v[:, rows, None], t_y[:, rows, cols], s_u[:, None, cols], t_x[:, rows, cols])
-                Kt, offsets, index = _tile_kernel(shifts, (V, Y, U, X), T)
+                Kt, offsets, index, spans = _tile_kernel(shifts, (V, Y, U, X), T, fused)
                 parts.append(Kt.reshape(-1))
-                layout.append((rows, cols, start, offsets))
+                layout.append((rows, cols, start, offsets, spans))
                 tiles.append((rows, cols, start, Kt.shape, index))
                 start += Kt.numel()
         ctx.save_for_backward(s_v, s_u, t_y, t_x)
@@ -226,10 +239,10 @@ class _TiledKernel(torch.autograd.Function):
             grads[1][:, cols] += gu[:, 0, :]
             grads[2][:, rows, cols] += gy
             grads[3][:, rows, cols] += gx
-        return (*grads, None, None, None)
+        return (*grads, None, None, None, None)
 
 
-def tiled_kernel(s_v, s_u, t_y, t_x, shape, side: int):
+def tiled_kernel(s_v, s_u, t_y, t_x, shape, side: int, fused: bool = False):
     """Per-tile 4D kernels of an exposure.
 
     Parameters
@@ -244,19 +257,23 @@ def tiled_kernel(s_v, s_u, t_y, t_x, shape, side: int):
         ``(V, U, Y, X, ...)`` of the light field.
     side : int
         Tile side, px.
+    fused : bool, default False
+        Build the kernels, and their gradient, with the fused CPU loops of
+        :mod:`~napari_lfdeblur._fused` (the same numbers).
 
     Returns
     -------
     K : torch.Tensor, 1D
         The tiles' kernels, flattened one after another; differentiable in
         the shifts.
-    layout : list of (slice, slice, int, torch.Tensor)
+    layout : list of (slice, slice, int, torch.Tensor, tuple or None)
         Per tile: its rows, its columns, where its ``(S, h, w)`` kernel
-        starts in ``K``, and its ``(S, 4)`` offsets of ``(v, y, u, x)``.
+        starts in ``K``, its ``(S, 4)`` offsets of ``(v, y, u, x)``, and,
+        with ``fused``, its taps' column spans (:func:`~napari_lfdeblur._fused.column_spans`).
     """
     layout = []
     t_y, t_x = (torch.broadcast_to(t, (s_v.shape[0], shape[2], shape[3])) for t in (t_y, t_x))
-    K = _TiledKernel.apply(s_v, s_u, t_y, t_x, tuple(shape), side, layout)
+    K = _TiledKernel.apply(s_v, s_u, t_y, t_x, tuple(shape), side, layout, bool(fused))
     return K, layout
 
 
@@ -283,14 +300,14 @@ def _fold_clamped(g: torch.Tensor, dim: int, pad) -> torch.Tensor:
 class _Tile:
     """Index vectors of one tile: its replicate-padded source region and where it folds back."""
 
-    def __init__(self, shape, rows, cols, start, offsets):
+    def __init__(self, shape, rows, cols, start, offsets, spans=None):
         V, U, Y, X, _ = shape
         dev = offsets.device
         self.rows, self.cols, self.start = rows, cols, start
         self.h, self.w = rows.stop - rows.start, cols.stop - cols.start
         self.origin = (rows.start, cols.start)
         self.offsets = np.ascontiguousarray(offsets.cpu().numpy(), dtype=np.int64)
-        self.spans = None  # the fused loops' column spans of its taps, when they are used
+        self.spans = spans  # the fused loops' column spans of its taps, when they are used
         off = offsets.tolist()
         lo = [min(min(o[i] for o in off), 0) for i in range(4)]
         hi = [max(max(o[i] for o in off), 0) for i in range(4)]
@@ -332,7 +349,8 @@ class TiledTaps:
         self.fused = _fused.available(self.K.device, self.K.dtype)
         if self.fused:
             for tile in self.tiles:
-                tile.spans = _fused.column_spans(tile.kernel(self.K))
+                if tile.spans is None:
+                    tile.spans = _fused.column_spans(tile.kernel(self.K))
 
     def with_view_step(self, view_step: int) -> "TiledTaps":
         """The same kernels and tiles, with output views ``0, view_step, ...`` only."""

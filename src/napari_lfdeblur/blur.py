@@ -340,8 +340,9 @@ class BlurOperator:
         if d != 0.0:
             t_y = t_y + d * self.s_v[:, :, None]
             t_x = t_x + d * self.s_u[:, None, :]
-        side = tile_side(self.shape, self.block_elements, _fused.available(self.device, self.dtype))
-        return tiled_kernel(self.s_v, self.s_u, t_y, t_x, self.shape, side)
+        fused = _fused.available(self.device, self.dtype)
+        return tiled_kernel(self.s_v, self.s_u, t_y, t_x, self.shape, tile_side(self.shape, self.block_elements, fused),
+                            fused)
 
     def _check(self, t: torch.Tensor, shape=None) -> torch.Tensor:
         """``t``, checked to be a torch tensor of ``shape`` (default: the operator's)."""
