@@ -167,12 +167,13 @@ def _tile_shift_grads(gK, shifts, sizes, index):
     """The gradient of ``<gK, K>`` with respect to each of the tile's four shifts (each of its shape).
 
     ``gK`` is the tile's ``(S, h, w)`` kernel gradient, already divided by
-    ``T``. Each weight is a product of one factor per axis, ``1 - f`` or
-    ``f``, so the derivative along an axis is the difference of the
-    gathered gradients of its two corners, weighted by the other axes'
-    factors; the corners are summed out one axis at a time (x, u, y, v).
-    ``f`` follows its shift within the clamped range, and not beyond
-    (:func:`axis_taps`).
+    ``T``; ``index`` what :func:`_tile_kernel` returned for its gradient
+    (a tuple: the fused loops' inputs). Each weight is a product of one
+    factor per axis, ``1 - f`` or ``f``, so the derivative along an axis is
+    the difference of the gathered gradients of its two corners, weighted
+    by the other axes' factors; the corners are summed out one axis at a
+    time (x, u, y, v). ``f`` follows its shift within the clamped range,
+    and not beyond (:func:`axis_taps`).
     """
     fv, fy, fu, fx = (axis_taps(s, n)[1] for s, n in zip(shifts, sizes))
     if isinstance(index, tuple):  # the fused loops' (base, slot, delta)
@@ -199,7 +200,8 @@ class _TiledKernel(torch.autograd.Function):
     """:func:`tiled_kernel`'s kernels with an analytic gradient in the shifts.
 
     The forward pass keeps, per tile, only where each corner of each lookup
-    landed in the kernel (int32); the backward pass recomputes the
+    landed in the kernel (int32; with ``fused``, the codes from which the
+    loops find it); the backward pass recomputes the
     fractions and gathers the kernel's gradient there. Autograd's own
     record of the 16 weights of every lookup, and of the products that make
     them, is many times the light field's size on a whole view. With
