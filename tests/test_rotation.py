@@ -185,9 +185,8 @@ def test_fused_kernel_build_and_gradient_equal_the_torch_version(dtype):
 
 
 @pytest.mark.parametrize("side", [16, 23, 128])
-def test_the_tiling_leaves_the_forward_bit_identical(side, monkeypatch):
-    # each pixel sums the same taps in the same order whatever tile holds it; the adjoint gathers the
-    # tiles' terms in another order, so it agrees to rounding
+def test_the_tiling_changes_the_blur_only_by_rounding(side, monkeypatch):
+    # each tile holds the taps its pixels use; the loops add them up in an order that depends on the tile
     from napari_lfdeblur import _fused, _taps_tiled
 
     if not _fused.available("cpu"):
@@ -199,8 +198,8 @@ def test_the_tiling_leaves_the_forward_bit_identical(side, monkeypatch):
         op = BlurOperator(lf.shape, CP6, n_times=9, infinity_disparity=0.4, device="cpu")
         assert op._tiles.tiles[0].w == min(s, 52)
         out[s] = op.forward(lf), op.adjoint(lf)
-    np.testing.assert_array_equal(out[side][0].numpy(), out[40][0].numpy())
-    np.testing.assert_allclose(out[side][1].numpy(), out[40][1].numpy(), rtol=1e-6, atol=1e-6)
+    for a, b in zip(out[side], out[40]):
+        np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=1e-6, atol=1e-6)
 
 
 def test_zero_rotation_with_a_gradient_gets_the_rotation_gradient():

@@ -11,8 +11,9 @@ per spatial tile, :mod:`~napari_lfdeblur._taps_tiled`). The torch versions make 
 multiply-add pass over a block of the light field per tap, through padded
 copies. These loops instead make one pass over the output, row by row in
 parallel: the rows a tap reads stay in cache, nothing is padded or copied,
-and the ``x`` loop is contiguous in ``(x, channel)``. Sums run over the taps
-in the same order, so the forward agrees with the torch version to rounding.
+and the ``x`` loop is contiguous in ``(x, channel)``. The forward adds the
+taps that read the same rows (they differ only in ``e``) in one pass, up to
+four at a time; it agrees with the torch version to rounding.
 
 The adjoint is written as a gather over the output rows of the adjoint (each
 thread owns the rows it writes), so it needs no atomic adds. Clamped indices

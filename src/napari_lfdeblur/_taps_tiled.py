@@ -77,8 +77,8 @@ def tile_side(shape, block_elements: int, fused: bool = False) -> int:
     costs as much as a few dozen multiply-adds. Their tiles are
     :data:`FUSED_TILE_SIDE` px: longer rows share that setup among more
     pixels, while the taps a tile holds grow with the spread of the
-    rotation's displacement over it. The tiling changes the order in which
-    the adjoint adds up, not the forward's sums.
+    rotation's displacement over it. The tiling changes the blur only by
+    rounding (the order in which the loops add up).
     """
     if fused:
         return FUSED_TILE_SIDE
