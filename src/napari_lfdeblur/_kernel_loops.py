@@ -47,7 +47,7 @@ def tile_accumulate(base, slot, delta, pv, py, pu, px, K, x0s, x1s):
                 if K[s, yl, xl] != 0:
                     past = xl + 1
                     break
-            x0s[s, yl], x1s[s, yl] = first, max(past, first)
+            x0s[s, yl], x1s[s, yl] = first, past
 
 
 @numba.njit(cache=True)

@@ -108,11 +108,15 @@ def _lookups(shifts, sizes):
     return base, delta, [f for _, f in taps], lo, width
 
 
+def _factor_pairs(fracs):
+    """Each axis's two bilinear factors ``(1 - f, f)``, stacked: ``(2, ...)`` of its fraction's shape."""
+    return [torch.stack(torch.broadcast_tensors(1.0 - f, f)) for f in fracs]
+
+
 def _corner_weights(fracs):
     """The 16 bilinear weights of each lookup, ``(16, T, h, w)``: products of one factor per axis."""
     w = None
-    for f in fracs:
-        pair = torch.stack(torch.broadcast_tensors(1.0 - f, f))  # (2, ...)
+    for pair in _factor_pairs(fracs):
         w = pair if w is None else (w[:, None] * pair[None]).flatten(0, 1)
     return w
 
@@ -146,8 +150,7 @@ def _tile_kernel(shifts, sizes, n_times, fused=False):
     offsets = torch.stack(offsets[::-1], dim=1)
     if fused:
         where = (base, torch.cumsum(used, 0) - 1, torch.tensor(delta, dtype=torch.int64))
-        pairs = [torch.stack(torch.broadcast_tensors(1.0 - f, f)) for f in fracs]
-        K, spans = _fused.tile_accumulate(*where, pairs, len(offsets))
+        K, spans = _fused.tile_accumulate(*where, _factor_pairs(fracs), len(offsets))
         return K / n_times, offsets, where, spans
     slot = (torch.cumsum(used, 0, dtype=torch.int32) - 1) * (h * w)
     pix = torch.arange(h * w, dtype=torch.int32, device=base.device).view(1, h, w)
