@@ -220,9 +220,10 @@ class _Alternation:
             step, fit, shown = item
             tick[0] = min(tick[0] + 1, self.per_outer - 1)
             return self.record(stage, fac, base + tick[0], shown, latent, alternation=outer, phase="path fit",
-                               step=step, fit=fit, **{"lambda": lam})
+                               step=step, fit=fit + sub.offset, **{"lambda": lam})
 
-        scores = (yield from relay(fit_path(params, sub, pp.steps, pp.lr), report)).detach().cpu().numpy()
+        scores = (yield from relay(fit_path(params, sub, pp.steps, pp.lr), report)).detach().cpu().double().numpy()
+        scores += sub.offset  # the mean squared residuals themselves
         k = int(np.argmin(scores))
         if first:
             self.info["restart_losses"] = scores.tolist()

@@ -118,7 +118,9 @@ class GramLoss:
     with ``G_t``, ``b_t`` the Gram matrix and correlation of the shifted
     latent gradients at a subset of pixels of tile ``t``: built once per
     latent (:meth:`set_latent`), after which a path step costs a few small
-    products. The shifts only re-index the views, so ``G_t`` and ``b_t``
+    products. Calling the loss leaves out the constant ``c`` (the data's
+    squared gradients), which no path changes; :attr:`offset` holds it, so
+    that ``loss(cp) + offset`` is the mean squared residual itself (>= 0). The shifts only re-index the views, so ``G_t`` and ``b_t``
     are sums of entries of the ``VU x VU`` Gram matrices of the views
     (latent with latent, latent with data), which are all that is computed
     over the pixels.
@@ -163,6 +165,7 @@ class GramLoss:
         self.shifted = (vidx[:, None, :, None] * U + uidx[None, :, None, :]).reshape(self.nO * self.nO, V * U)
         self.G = None
         self.scale = 1.0 / max(1, self.F.numel())
+        self.offset = 0.0
 
     @torch.no_grad()
     def set_latent(self, latent, cp=None, robust: float = 0.0, sigma=0.0):
@@ -197,6 +200,7 @@ class GramLoss:
             G[t] = C[I[:, None, :], I[None, :, :]].sum(dim=-1)
             b[t] = D[I, diag[None, :]].sum(dim=-1)
         self.G, self.b = G, b
+        self.offset = float((F.double().square().sum(dim=(0, 1)) * w.double()).sum()) * self.scale
 
     def kernels(self, cp):
         """The splat kernels of the tiles, ([B,] n_tiles, nO*nO) for control points ([B,] n, 3)."""
@@ -218,7 +222,7 @@ class GramLoss:
         return K / self.T
 
     def __call__(self, cp):
-        """The fit (up to a constant) of control points ([B,] n, 3): shape ([B,])."""
+        """The fit of control points ([B,] n, 3) less :attr:`offset`: shape ([B,])."""
         K = self.kernels(cp)
         quad = torch.einsum("...ti,tij,...tj->...", K, self.G, K) - 2.0 * (self.b * K).sum(dim=(-1, -2))
         return quad * self.scale
@@ -237,6 +241,11 @@ class SumLoss:
 
     def __call__(self, cp):
         return sum(part(cp) for part in self.parts)
+
+    @property
+    def offset(self) -> float:
+        """The constant the parts' losses leave out (:attr:`GramLoss.offset`)."""
+        return sum(part.offset for part in self.parts)
 
 
 def fit_path(pp: PathParam, loss_fn, steps: int, lr: float, every: int = FIT_REPORT_EVERY):
