@@ -294,6 +294,9 @@ def _deconvolve_command(args, path_file) -> str:
     if args.angular_crop is not None:
         crop = args.angular_crop
         words += ["--angular-crop", ",".join(map(str, crop)) if isinstance(crop, tuple) else str(crop)]
+    if args.value_range is not None:  # one word, so that a negative LO is not read as an option
+        vr = args.value_range
+        words.append("--value-range=" + (vr if isinstance(vr, str) else ",".join(repr(float(v)) for v in vr)))
     return shlex.join(words)
 
 
