@@ -431,14 +431,20 @@ def _run_deconvolve(args):
         method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
         couple_channels=not args.separate_channels, saturation=not args.no_saturation,
     )
-    bar = _progress(total=args.iterations, desc="deconvolve", unit="it")
+    # no bar and no time left: the solve usually stops well before its last iteration, when the objective settles
+    bar = _progress(total=args.iterations, desc="deconvolve", unit="it",
+                    bar_format="{desc}: iteration {n_fmt} of at most {total_fmt} [{elapsed}, {rate_fmt}{postfix}]")
     last = []
 
     def show(rec):
         last[:] = [rec]
         bar.total = rec.n_iterations
         bar.n = rec.iteration
-        bar.set_postfix_str(f"{rec.stage} loss={rec.loss:.4g}", refresh=False)
+        text = f"{rec.stage} loss={rec.loss:.4g}"
+        decrease = rec.info.get("relative_decrease")
+        if decrease is not None and args.tol > 0:
+            text += f", decrease {decrease:.1e} (stops below {args.tol:g})"
+        bar.set_postfix_str(text, refresh=False)
         bar.refresh()
 
     try:
