@@ -822,3 +822,18 @@ def test_solver_steps_and_samples_run_on_one_torch_thread(make_napari_viewer, mo
     assert len(set(seen)) == 1 and seen[0] is not threading.main_thread()
     assert data.shape[:4] == sample_data.SYNTHETIC_SHAPE
     assert not [n for n in notifications if n[0] == "error"], notifications
+
+
+def test_progress_panel_promises_no_time_left_to_a_solve_that_stops_when_it_settles(qapp):
+    from napari_lfdeblur._napari.widgets._runner import ProgressPanel
+    from napari_lfdeblur.progress import Progress
+
+    panel = ProgressPanel()
+    panel.start()
+    panel.update_progress(Progress(stage="path", iteration=20, n_iterations=100, loss=1.0))
+    assert "left" in panel.status.value and panel.eta_seconds is not None
+    # the TV solve: 20 of at most 200 iterations says nothing of the time left
+    panel.update_progress(Progress(stage="tv", iteration=20, n_iterations=200, loss=1.0,
+                                   info={"relative_decrease": 3e-4}))
+    assert "left" not in panel.status.value and "decreasing by 3.0e-04" in panel.status.value
+    assert panel.eta_seconds is None

@@ -81,7 +81,11 @@ class ProgressPanel(Container):
         frac = float(getattr(progress, "fraction", 0.0))
         self.bar.value = int(round(1000 * frac))
         elapsed = self._elapsed()
-        if frac > 0.01:
+        decrease = (getattr(progress, "info", None) or {}).get("relative_decrease")
+        if decrease is not None:  # a solve that stops once its objective settles, mostly well before n_iterations
+            self.eta_seconds = None
+            eta = f", objective decreasing by {decrease:.1e}"
+        elif frac > 0.01:
             self.eta_seconds = elapsed * (1.0 - frac) / frac
             eta = f", about {format_seconds(self.eta_seconds)} left"
         else:
