@@ -450,10 +450,8 @@ class BlindResult:
         ``params.n_times`` (hence for any number of instants, up to
         sampling), time-canonicalised.
     loss_history : list of float
-        The objective after every alternation (``'alternating'``: the path
-        fit, a mean squared residual of gradients, >= 0; with
-        ``motion='6dof'`` then the rotation stage's fits) or iteration
-        (``'joint'``) of the path estimation.
+        The objective after every alternation (``'alternating'``: the path fit,
+        >= 0) or iteration (``'joint'``) of the path estimation.
     params : BlindParams
     timings : dict
         Seconds spent per stage (``'path'``, ``'final'``, ``'total'``).
