@@ -440,11 +440,9 @@ def _run_deconvolve(args):
         last[:] = [rec]
         bar.total = rec.n_iterations
         bar.n = rec.iteration
-        text = f"{rec.stage} loss={rec.loss:.4g}"
-        decrease = rec.info.get("relative_decrease")
-        if decrease is not None and args.tol > 0:
-            text += f", decrease {decrease:.1e} (stops below {args.tol:g})"
-        bar.set_postfix_str(text, refresh=False)
+        d = rec.info.get("relative_decrease")
+        stop = f", decrease {d:.1e} (stops below {args.tol:g})" if d is not None and args.tol > 0 else ""
+        bar.set_postfix_str(f"{rec.stage} loss={rec.loss:.4g}{stop}", refresh=False)
         bar.refresh()
 
     try:
