@@ -118,12 +118,12 @@ class GramLoss:
     with ``G_t``, ``b_t`` the Gram matrix and correlation of the shifted
     latent gradients at a subset of pixels of tile ``t``: built once per
     latent (:meth:`set_latent`), after which a path step costs a few small
-    products. Calling the loss leaves out the constant ``c`` (the data's
-    squared gradients), which no path changes; :attr:`offset` holds it, so
-    that ``loss(cp) + offset`` is the mean squared residual itself (>= 0). The shifts only re-index the views, so ``G_t`` and ``b_t``
+    products. The shifts only re-index the views, so ``G_t`` and ``b_t``
     are sums of entries of the ``VU x VU`` Gram matrices of the views
     (latent with latent, latent with data), which are all that is computed
-    over the pixels.
+    over the pixels. Calling the loss leaves out the constant ``c`` (the
+    data's squared gradients), which no path changes; :attr:`offset` holds
+    it, so that ``loss(cp) + offset`` is the mean squared residual (>= 0).
 
     ``frame = (y0, x0, Y_full, X_full)`` says that ``f`` is the window at
     ``(y0, x0)`` of a larger view: the path is then that of the larger view
