@@ -132,6 +132,8 @@ def test_result_gauge_and_range(linear_case, linear_result):
     V = linear_case[0].shape[0]
     assert np.abs(cp).max() <= 0.35 * (V - 1) + 1e-6
     assert res.loss_history and all(np.isfinite(res.loss_history))
+    # the path fits themselves, mean squared residuals of the gradients: never below 0
+    assert min(res.loss_history) >= 0 and min(res.info["restart_losses"]) >= 0
     assert set(res.timings) >= {"path", "final", "total"}
 
 
