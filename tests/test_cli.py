@@ -250,12 +250,18 @@ def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_pa
         yield Progress("path", 1, 4, loss=0.125)
         yield Progress("path", 2, 4)  # inside a path-fit step: NaN loss
         yield Progress("path", 3, 4)
+        yield Progress("final", 1, 200, loss=7.0, stage_index=1, n_stages=2, info={"relative_decrease": 0.01})
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params)
 
     monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
     assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu"]) == 0
     err = capsys.readouterr().err
     assert "loss 0.125" in err and "nan" not in err
+    # the path stage's bar gives the time left; the final TV solve's, which stops when it settles, does not
+    shown = [line for line in err.split("\r") if "loss" in line]
+    assert all("<" in line for line in shown if line.startswith("path"))
+    assert any(line.startswith("final") for line in shown)
+    assert not any("<" in line for line in shown if line.startswith("final"))
 
 
 def test_deblur_help_describes_motion(capsys):

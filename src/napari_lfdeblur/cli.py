@@ -135,14 +135,12 @@ def _add_simulate(sub):
     p = sub.add_parser("simulate", help="blur a light field by a known camera path")
     _input_argument(p)
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
-    p.add_argument(
-        "--path",
-        required=True,
-        help="camera path: a JSON file of control points ((n, 3), or (n, 6) with a rotation), or "
-        "PRESET[:EXTENT[:SEED]] with PRESET one of linear, arc, shake, shake6, random; EXTENT in views. "
-        "shake6 is shake plus a random camera rotation (handheld shake), written shake6[:EXTENT[:SEED[:ROTATION]]] "
-        "with ROTATION the largest rotation in radians (default 0.005, at most 0.2)",
-    )
+    p.add_argument("--path", required=True,
+                   help="camera path: a JSON file of control points ((n, 3), or (n, 6) with a rotation), or "
+                   "PRESET[:EXTENT[:SEED]] with PRESET one of linear, arc, shake, shake6, random; EXTENT in views. "
+                   "shake6 is shake plus a random camera rotation (handheld shake), written "
+                   "shake6[:EXTENT[:SEED[:ROTATION]]] with ROTATION the largest rotation in radians (default 0.005, "
+                   "at most 0.2)")
     p.add_argument("--n-times", type=int, default=32, help="exposure instants T (default 32)")
     p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
@@ -260,6 +258,8 @@ def _run_deblur(args):
 
     def show(rec):
         bar.n = int(1000 * rec.fraction)
+        if "relative_decrease" in rec.info:  # the final TV solve stops once its objective settles: no time left
+            bar.bar_format = "{l_bar}{bar}| {elapsed} {postfix}"
         bar.set_description(rec.stage, refresh=False)
         if rec.loss == rec.loss:  # records inside a path-fit step carry no loss (NaN): the last one stays shown
             bar.set_postfix_str(f"loss {rec.loss:.3g}", refresh=False)
