@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import json
+import sys
 import threading
 from pathlib import Path
 
@@ -277,6 +278,31 @@ def test_embedded_cluster_workers_start_with_malloc_thresholds_no_profiler_and_s
     # the trim threshold replaces the nanny's 64 KiB: glibc's dynamic rule, twice the mmap threshold
     assert list(found.values()) == [(str(WORKER_MMAP_THRESHOLD), str(2 * WORKER_MMAP_THRESHOLD))]
     assert list(profiled.values()) == [(False, "500ms")]  # the timers' settings reach the worker process
+
+
+def test_embedded_cluster_workers_log_a_lost_connection_on_one_line():
+    # on Ctrl-C the scheduler can close before a worker, whose heartbeat then logs the lost connection with
+    # exc_info: the CLI must print no traceback, so the worker's own handlers fold it into one line
+    import logging
+
+    from napari_lfdeblur.batch import connect
+
+    def heartbeat_failure():
+        try:
+            raise OSError("Stream is closed")
+        except OSError:
+            record = logging.getLogger("distributed.worker").makeRecord(
+                "distributed.worker", logging.ERROR, __file__, 1, "Failed to communicate with scheduler", None,
+                sys.exc_info())
+        handlers = logging.getLogger("distributed").handlers
+        return [h.format(record) for h in handlers if h.filter(record)]
+
+    with connect(workers=1, device="cpu") as c:
+        (lines,) = c.run(heartbeat_failure).values()
+    assert len(lines) >= 1
+    for line in lines:
+        assert "Traceback" not in line and "\n" not in line, line
+        assert line.endswith("Failed to communicate with scheduler OSError: Stream is closed"), line
 
 
 def test_shake6_items_are_6dof_and_blurred_by_their_path():

@@ -6,7 +6,6 @@ printed, and a line per failed item), 2 on bad usage.
 
 from __future__ import annotations
 
-import logging
 import shlex
 import sys
 from pathlib import Path
@@ -97,29 +96,6 @@ def _bar(total: int):
     return tqdm(total=total, unit="item", file=sys.stderr, dynamic_ncols=True)
 
 
-class _OneLine(logging.Filter):
-    """Fold a log record's traceback into one line: ``message ExcType: text``."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        if record.exc_info and record.exc_info[1] is not None:
-            exc = record.exc_info[1]
-            record.msg = f"{record.getMessage()} {type(exc).__name__}: {exc}".strip()
-            record.args, record.exc_info, record.exc_text = None, None, None
-        return True
-
-
-def _dask_logs_without_tracebacks() -> None:
-    """dask logs the exceptions it meets (a lost scheduler, a killed worker) with tracebacks: fold them."""
-    try:
-        import distributed  # noqa: F401  (its logging set-up gives the handlers to filter)
-    except ImportError:  # connect() says how to install it
-        return
-    handlers = logging.getLogger("distributed").handlers
-    for h in handlers:
-        if not any(isinstance(f, _OneLine) for f in h.filters):
-            h.addFilter(_OneLine())
-
-
 def run_batch(args) -> int:
     """Run ``lfdeblur batch ...``; returns the exit status (0, or 1 when items failed)."""
     from .cli import CLIError
@@ -132,6 +108,7 @@ def run_batch(args) -> int:
 
 def _run(args) -> int:
     from .batch import connect, deblur_many, expand_inputs, simulate_dataset
+    from .batch._worker_setup import fold_dask_tracebacks
 
     n_inputs = len(expand_inputs(args.inputs))
     if args.workers is not None and args.workers < 1:
@@ -144,7 +121,7 @@ def _run(args) -> int:
                        noise=args.noise, n_times=args.n_times)
     else:
         total, run, options = n_inputs, deblur_many, dict(params=_params(args))
-    _dask_logs_without_tracebacks()
+    fold_dask_tracebacks()  # this process's; the embedded workers fold their own
     with connect(args.scheduler, workers=args.workers, device=args.device) as client:
         print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr, flush=True)
         bar = _bar(total)
