@@ -177,6 +177,32 @@ def test_simulate_shake6_writes_a_6_column_path(lf_file, tmp_path, capsys):
     np.testing.assert_allclose(load_path_json(tmp_path / "c.path.json"), preset_path("shake6", 1.0, 3))
 
 
+def test_info_describes_a_camera_path_file(tmp_path, capsys):
+    # a straight motion of 2 views at 30 degrees, sampled at its two ends: 2 views across and travelled
+    save_path_json(tmp_path / "line.json", linear_path(length=2.0, angle_deg=30.0), n_times=5, note="mine")
+    assert main(["info", str(tmp_path / "line.json")]) == 0
+    out = capsys.readouterr().out
+    assert "3-DOF, 2 control points" in out and "extent:      2 views in (p_x, p_y) over the exposure (5 instants); " \
+        "2 views travelled" in out
+    assert "p_z:         0 (in-plane motion)" in out and 'note: "mine"' in out and "rotation" not in out
+    # out of plane: p_z from -0.4 to 0.4 (its control points, a straight Bezier reaches both); a rotation
+    cp = np.array([[0.0, 0.0, -0.4, 0.0, 0.0, 0.0], [0.0, 0.0, 0.4, 0.003, -0.02, 0.001]])
+    save_path_json(tmp_path / "z.json", cp)
+    assert main(["info", str(tmp_path / "z.json")]) == 0
+    out = capsys.readouterr().out
+    assert "6-DOF, 2 control points" in out and "p_z:         -0.4 to 0.4" in out
+    assert "rotation:    up to 20.00 mrad (1.15 deg; pitch r_x 3.00, yaw r_y 20.00, roll r_z 1.00" in out
+    assert "extent:      0 views" in out and "does not blur" not in out  # it zooms
+    save_path_json(tmp_path / "still.json", np.zeros((3, 3)))
+    assert main(["info", str(tmp_path / "still.json")]) == 0
+    assert "this path does not blur" in capsys.readouterr().out
+    # not a path: one line, no traceback
+    (tmp_path / "bad.json").write_text('{"control_points": [[1, 2]]}')
+    assert main(["info", str(tmp_path / "bad.json")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.json" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
 @pytest.mark.parametrize("motion", [None, "3dof", "6dof"])
 def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, tmp_path, monkeypatch, motion):
     from napari_lfdeblur import blind

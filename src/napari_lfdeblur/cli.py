@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
+from ._cli_info import describe_path_file, rotation_note
 from ._cli_types import angular_crop, fraction, gib, value_range
 from ._lightfield import DARK_LEVEL, brightest
 
@@ -118,16 +119,6 @@ def _path_argument(text: str, n_times: int | None = None):
     return preset_path(name, extent=extent, seed=seed, rotation=rotation)
 
 
-def _rotation_note(cp) -> str:
-    """`` (6-DOF, rotation up to X mrad)`` for a path with rotation columns, else ``''``."""
-    import numpy as np
-
-    cp = np.asarray(cp)
-    if cp.ndim != 2 or cp.shape[1] != 6:
-        return ""
-    return f" (6-DOF, rotation up to {1000 * float(np.abs(cp[:, 3:]).max()):.2f} mrad)"
-
-
 # ------------------------------------------------------------- simulate
 
 
@@ -162,7 +153,7 @@ def _run_simulate(args):
     written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp,
                                metadata={"kind": "blurred", "n_times": args.n_times,
                                          "infinity_disparity": args.infinity_disparity})
-    print(f"wrote {written} {blurred.shape}, with its camera path{_rotation_note(cp)}, T and d_inf beside it")
+    print(f"wrote {written} {blurred.shape}, with its camera path{rotation_note(cp)}, T and d_inf beside it")
 
 
 # ---------------------------------------------------------------- deblur
@@ -282,7 +273,7 @@ def _run_deblur(args):
                        infinity_disparity=d_inf, motion=params.motion)
         print(f"the path it rejected is in {rejected_file}; to restore with it without estimating it again: "
               f"{_deconvolve_command(args, rejected_file)}")
-    print(f"wrote {out} {result.lightfield.shape} and its path {path_file}{_rotation_note(result.control_points)} "
+    print(f"wrote {out} {result.lightfield.shape} and its path {path_file}{rotation_note(result.control_points)} "
           f"({result.timings.get('total', float('nan')):.1f} s)")
 
 
@@ -329,8 +320,9 @@ def _run_demo(args):
 
 
 def _add_info(sub):
-    p = sub.add_parser("info", help="describe a light field: layout, shape, dtype, value range, metadata")
-    _input_argument(p)
+    p = sub.add_parser("info", help="describe a light field (layout, shape, dtype, value range, metadata) or a "
+                       "camera path .json (motion, extent, rotation)")
+    _input_argument(p, "light field file or folder, or a camera path .json")
     p.add_argument("--layout", default=None, help="override the detected layout (views, hci, stanford, eslf, "
                    "mosaic, mat, h5, npy, npz, tiff)")
     p.add_argument("--grid", default=None, help="V,U view grid (mosaic layout)")
@@ -342,6 +334,9 @@ def _run_info(args):
 
     import numpy as np
 
+    if Path(args.input).suffix.lower() == ".json":
+        print("\n".join(describe_path_file(args.input)))
+        return
     options = {"layout": args.layout}
     if args.grid:
         try:

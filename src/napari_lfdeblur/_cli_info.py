@@ -1,0 +1,71 @@
+"""``lfdeblur info`` on a camera path file (``.json``): what the path does, in the model's units."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["describe_path_file", "rotation_note"]
+
+#: Instants a path is sampled at when its file does not state ``n_times`` (the command's default)
+DEFAULT_N_TIMES = 32
+
+
+def describe_path_file(path) -> list[str]:
+    """Lines that describe the camera path in the JSON file ``path`` (as ``save_path_json`` writes it).
+
+    The motion (3- or 6-DOF), the in-plane extent (the largest distance
+    between two positions of ``(p_x, p_y)`` over the exposure, views), the
+    distance travelled (views), the range of ``p_z`` over the exposure and
+    the largest rotation of the control points, then the file's other fields.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        As :func:`~napari_lfdeblur.path.load_path_json` (a missing file, bad
+        JSON, no or malformed control points).
+    """
+    from .path import bezier_positions, load_path_json
+
+    cp = load_path_json(path)
+    doc = json.loads(Path(path).read_text())
+    extra = {k: v for k, v in doc.items() if k not in ("control_points", "units")} if isinstance(doc, dict) else {}
+    n_times = extra.get("n_times", DEFAULT_N_TIMES)
+    n_times = n_times if isinstance(n_times, int) and n_times >= 2 else DEFAULT_N_TIMES
+    pos = bezier_positions(cp, n_times)
+    xy = pos[:, :2]
+    extent = float(np.linalg.norm(xy[:, None] - xy[None], axis=-1).max())
+    travelled = float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
+    six = cp.shape[1] == 6
+    lines = [f"path:        {path}",
+             f"motion:      {'6-DOF' if six else '3-DOF'}, {len(cp)} control points "
+             f"({'p_x, p_y, p_z, r_x, r_y, r_z' if six else 'p_x, p_y, p_z'})",
+             f"extent:      {extent:.3g} views in (p_x, p_y) over the exposure ({n_times} instants); "
+             f"{travelled:.3g} views travelled"]
+    pz = pos[:, 2]
+    lines.append("p_z:         0 (in-plane motion)" if not np.any(cp[:, 2]) else
+                 f"p_z:         {pz.min():.3g} to {pz.max():.3g} (views per unit of normalised x~)")
+    if six:
+        r = np.abs(cp[:, 3:]).max(axis=0)  # of the control points, as rotation_note and the shake6 preset
+        lines.append(f"rotation:    up to {1000 * r.max():.2f} mrad ({np.degrees(r.max()):.3g} deg; pitch r_x "
+                     f"{1000 * r[0]:.2f}, yaw r_y {1000 * r[1]:.2f}, roll r_z {1000 * r[2]:.2f}; of the control "
+                     "points)")
+    if extent == 0 and not np.any(cp[:, 2:]):
+        lines.append("note:        the camera does not move: this path does not blur")
+    lines.append("fields:" + ("" if extra else "      (none)"))
+    lines += [f"  {key}: {json.dumps(value, default=str)}" for key, value in extra.items()]
+    return lines
+
+
+def rotation_note(cp) -> str:
+    """`` (6-DOF, rotation up to X mrad)`` for a path with rotation columns, else ``''``.
+
+    X is the largest ``|r_x|, |r_y|, |r_z|`` of the control points (which
+    bounds the path's, and is the ROTATION of a ``shake6`` preset).
+    """
+    cp = np.asarray(cp)
+    if cp.ndim != 2 or cp.shape[1] != 6:
+        return ""
+    return f" (6-DOF, rotation up to {1000 * float(np.abs(cp[:, 3:]).max()):.2f} mrad)"
