@@ -5,7 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from napari_lfdeblur import read_lightfield, simulate_blur
+import napari_lfdeblur
+from napari_lfdeblur import read_lightfield, read_lightfield_with_metadata, simulate_blur
+from napari_lfdeblur.blind import BlindParams
 from napari_lfdeblur.cli import main
 from napari_lfdeblur.path import linear_path, load_path_json, preset_path, save_path_json
 
@@ -224,9 +226,14 @@ def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, 
     assert main(args + (["--motion", motion] if motion else [])) == 0
     params = seen["params"]
     assert params.motion == (motion or "3dof") and params.n_control_points == 5 and params.path.n_outer == 1
-    doc = json.loads((tmp_path / "o_path.json").read_text())
-    assert np.shape(doc["control_points"]) == ((5, 6) if motion == "6dof" else (5, 3))
-    assert doc["motion"] == (motion or "3dof")
+    # the path goes where reading the result back finds it; the file states the parameters and the version
+    result, meta = read_lightfield_with_metadata(tmp_path / "o.npz")
+    cp = load_path_json(tmp_path / "o.path.json")
+    assert cp.shape == ((5, 6) if motion == "6dof" else (5, 3))
+    np.testing.assert_array_equal(meta["control_points"], cp)
+    saved = meta["saved_metadata"]
+    assert saved["motion"] == (motion or "3dof") and saved["napari_lfdeblur_version"] == napari_lfdeblur.__version__
+    assert BlindParams.from_dict(saved["parameters"]) == params and saved["preset"] is None  # --params, no preset
 
 
 def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_it(lf_file, tmp_path, monkeypatch,
@@ -250,7 +257,7 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
             "--value-range", "0,2"]
     assert main(args) == 0
     printed = capsys.readouterr().out.splitlines()
-    np.testing.assert_allclose(load_path_json(tmp_path / "o_path_rejected.json"), rejected)
+    np.testing.assert_allclose(load_path_json(tmp_path / "o.path_rejected.json"), rejected)
     command = shlex.split(printed[printed.index("little blur found") + 1].split("again: ")[1])
     assert command[:2] == ["lfdeblur", "deconvolve"] and "OUTPUT" in command
     # the printed command restores with the rejected path, at the d_inf the file records, from the data read
@@ -261,9 +268,13 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     np.testing.assert_allclose(read_lightfield(tmp_path / "r.npz"), expected, atol=1e-5)
     # a second run would replace the rejected path's file: refused without --overwrite
     (tmp_path / "o.npz").unlink()
-    (tmp_path / "o_path.json").unlink()
+    (tmp_path / "o.path.json").unlink()
     assert main(args) == 2
-    assert "o_path_rejected.json exists" in capsys.readouterr().err and not (tmp_path / "o.npz").exists()
+    assert "o.path_rejected.json exists" in capsys.readouterr().err and not (tmp_path / "o.npz").exists()
+    # with --path-out, a copy of the path there and the rejected one beside it
+    assert main(args + ["--overwrite", "--path-out", str(tmp_path / "p.json")]) == 0
+    np.testing.assert_array_equal(load_path_json(tmp_path / "p.json"), load_path_json(tmp_path / "o.path.json"))
+    np.testing.assert_allclose(load_path_json(tmp_path / "p_rejected.json"), rejected)
 
 
 def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_path, monkeypatch, capsys):

@@ -193,8 +193,9 @@ def _add_deblur(sub):
                         "restore with the estimated path scaled by FRACTION (in [0, 1]) instead of returning "
                         "the input: a light restoration (BlindParams.light_restoration; default: the preset's, "
                         "0.5 for 'default', 0 for 'paper'; 0: return the input)")
-    p.add_argument("--path-out", help="where to save the estimated path (default: OUTPUT_path.json beside OUTPUT); "
-                                      "a path that the evidence test rejects goes beside it, as *_rejected.json")
+    p.add_argument("--path-out", help="also save the estimated path here (it always goes beside OUTPUT as NAME.path"
+                   ".json, in a folder of views as path.json); a rejected path goes beside OUTPUT as NAME.path_"
+                   "rejected.json, or with --path-out beside that file as *_rejected.json")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
 
 
@@ -218,14 +219,18 @@ def _stated_infinity_disparity(given, meta: dict, source) -> float:
 def _run_deblur(args):
     from .blind import BlindParams, iter_blind_deblur
     from .progress import run_to_completion
+    from . import __version__
     from .io import write_lightfield
+    from .io._write import sidecar_path_json
     from .path import save_path_json
 
     out = Path(args.output)
-    path_file = Path(args.path_out) if args.path_out else out.with_name(out.stem + "_path.json")
-    rejected_file = path_file.with_name(path_file.stem + "_rejected" + path_file.suffix)
-    for target in (out, path_file, rejected_file):
-        if target.exists() and not args.overwrite:
+    path_file = sidecar_path_json(out)  # where reading the result back finds its path
+    extra_file = Path(args.path_out) if args.path_out else None
+    rejected_file = (extra_file.with_name(extra_file.stem + "_rejected" + extra_file.suffix) if extra_file else
+                     out.with_name((out.name[: -len(out.suffix)] if out.suffix else out.name) + ".path_rejected.json"))
+    for target in (out, path_file, extra_file, rejected_file):
+        if target is not None and target.exists() and not args.overwrite:
             raise CLIError(f"{target} exists; pass --overwrite to replace it")
     if args.params:
         if not Path(args.params).is_file():
@@ -261,16 +266,17 @@ def _run_deblur(args):
     finally:
         gen.close()
         bar.close()
-    write_lightfield(out, result.lightfield, overwrite=args.overwrite,
-                     metadata={"kind": "deblurred (blind)", "infinity_disparity": d_inf})
-    save_path_json(path_file, result.control_points, overwrite=True, n_times=params.n_times,
-                   infinity_disparity=d_inf, preset=args.preset if not args.params else None, motion=params.motion,
-                   timings=result.timings)
+    fields = dict(n_times=params.n_times, infinity_disparity=d_inf, motion=params.motion)
+    write_lightfield(out, result.lightfield, overwrite=args.overwrite, control_points=result.control_points,
+                     metadata={"kind": "deblurred (blind)", **fields, "preset": None if args.params else args.preset,
+                               "parameters": params.to_dict(), "timings": result.timings,
+                               "napari_lfdeblur_version": __version__})
+    if extra_file is not None:
+        save_path_json(extra_file, result.control_points, overwrite=True, **fields)
     if "message" in result.info:
         print(result.info["message"])
     if "rejected_path" in result.info:
-        save_path_json(rejected_file, result.info["rejected_path"], overwrite=True, n_times=params.n_times,
-                       infinity_disparity=d_inf, motion=params.motion)
+        save_path_json(rejected_file, result.info["rejected_path"], overwrite=True, **fields)
         print(f"the path it rejected is in {rejected_file}; to restore with it without estimating it again: "
               f"{_deconvolve_command(args, rejected_file)}")
     print(f"wrote {out} {result.lightfield.shape} and its path {path_file}{rotation_note(result.control_points)} "

@@ -59,9 +59,15 @@ def _quantize(lf: np.ndarray, bit_depth: int) -> np.ndarray:
     return np.rint(np.clip(lf, 0.0, 1.0) * top).astype(dtype)
 
 
-def sidecar_path_json(path: Path, layout: str) -> Path:
-    """Where the camera path of a light field written to ``path`` goes."""
-    if layout == "views":
+def sidecar_path_json(path, layout: str | None = None) -> Path:
+    """Where :func:`write_lightfield` puts the camera path of a light field written to ``path``.
+
+    ``<name>.path.json`` beside a file, ``path.json`` inside a folder of
+    views; ``layout`` as :func:`write_lightfield` takes it (None: from the
+    suffix). Raises LightFieldFormatError when the suffix names no format.
+    """
+    path = Path(path)
+    if _layout_of(path, layout) == "views":
         return path / "path.json"
     return path.with_name(path.name[: -len(path.suffix)] + ".path.json" if path.suffix else path.name + ".path.json")
 
