@@ -305,6 +305,26 @@ def test_embedded_cluster_workers_log_a_lost_connection_on_one_line():
         assert line.endswith("Failed to communicate with scheduler OSError: Stream is closed"), line
 
 
+def test_a_ctrl_c_that_lands_in_a_finalizer_still_stops_the_run():
+    # Python reports an exception raised in __del__ as "ignored" and goes on: a Ctrl-C that lands while a
+    # dask Future is released would be lost, and the batch run would go to its end
+    import time
+
+    from napari_lfdeblur._cli_batch import ctrl_c_never_swallowed
+
+    class Releasing:
+        def __del__(self):
+            raise KeyboardInterrupt
+
+    default = sys.unraisablehook
+    with pytest.raises(KeyboardInterrupt), ctrl_c_never_swallowed():
+        obj = Releasing()
+        del obj  # the finalizer's KeyboardInterrupt is raised again in the main thread, right after
+        for _ in range(100):
+            time.sleep(0.01)
+    assert sys.unraisablehook is default
+
+
 def test_shake6_items_are_6dof_and_blurred_by_their_path():
     from napari_lfdeblur.batch._items import draw_path
 

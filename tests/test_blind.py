@@ -948,7 +948,7 @@ def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys, monkeypatch):
     assert main(["deblur", str(src), str(out), "--params", str(params), "--device", "cpu"]) == 0
     assert out.exists()
     assert "blur found" in capsys.readouterr().out  # the verdict of the evidence test is printed
-    cp = load_path_json(tmp_path / "sharp_path.json")
+    cp = load_path_json(tmp_path / "sharp.path.json")
     assert cp.shape[1] == 3
     # existing output without --overwrite: a one-line error, status 2
     assert main(["deblur", str(src), str(out), "--params", str(params)]) == 2

@@ -6,13 +6,16 @@ printed, and a line per failed item), 2 on bad usage.
 
 from __future__ import annotations
 
+import _thread
+import contextlib
 import shlex
 import sys
+import threading
 from pathlib import Path
 
 from ._cli_types import value_range
 
-__all__ = ["add_batch", "run_batch", "weak_blur_summary"]
+__all__ = ["add_batch", "run_batch", "weak_blur_summary", "ctrl_c_never_swallowed"]
 
 
 def _common(p) -> None:
@@ -122,7 +125,7 @@ def _run(args) -> int:
     else:
         total, run, options = n_inputs, deblur_many, dict(params=_params(args))
     fold_dask_tracebacks()  # this process's; the embedded workers fold their own
-    with connect(args.scheduler, workers=args.workers, device=args.device) as client:
+    with ctrl_c_never_swallowed(), connect(args.scheduler, workers=args.workers, device=args.device) as client:
         print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr, flush=True)
         bar = _bar(total)
 
@@ -144,6 +147,36 @@ def _run(args) -> int:
         return 1
     print(f"all {total} items in {args.out_dir} ({done})")
     return 0
+
+
+@contextlib.contextmanager
+def ctrl_c_never_swallowed():
+    """Within it, a KeyboardInterrupt raised in a finalizer reaches the main thread.
+
+    A Ctrl-C can land while the main thread runs a finalizer (a dask
+    ``Future.__del__``, when a finished item's future is released): Python
+    then prints "Exception ignored" with a traceback and carries on, and the
+    run would go to its end. Here nothing is printed and the interrupt is
+    raised again in the main thread (``_thread.interrupt_main``) 0.1 s later,
+    from a timer thread, so that it arrives once the finalizer and this hook
+    have returned (raised within them, it would be ignored again; should it
+    land in another finalizer, the same happens again).
+    """
+    default = sys.unraisablehook
+
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            timer = threading.Timer(0.1, _thread.interrupt_main)
+            timer.daemon = True
+            timer.start()
+        else:
+            default(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = default
 
 
 def weak_blur_summary(records) -> str:
