@@ -704,9 +704,10 @@ def test_plane_texture_bad_input():
 
 
 def test_cli_deconvolve(tmp_path, capsys):
+    import napari_lfdeblur
     from napari_lfdeblur.cli import main
-    from napari_lfdeblur.io import read_lightfield
-    from napari_lfdeblur.path import save_path_json
+    from napari_lfdeblur.io import read_lightfield, read_lightfield_with_metadata
+    from napari_lfdeblur.path import load_path_json, save_path_json
 
     lf = np.random.default_rng(8).random((5, 5, 10, 10)).astype(np.float32)
     cp = linear_path(1.5, angle_deg=10)
@@ -716,11 +717,20 @@ def test_cli_deconvolve(tmp_path, capsys):
     path_file = save_path_json(tmp_path / "path.json", cp, n_times=8)
     out = tmp_path / "out.npz"
     assert main(["deconvolve", str(src), str(path_file), str(out), "--weight", "0"]) == 0
-    got = read_lightfield(out)
+    got, meta = read_lightfield_with_metadata(out)
     assert np.abs(got - lf).max() < 1e-3  # n_times came from the path file; exact in-plane inverse
-    # an existing output is kept unless --overwrite
+    # the result states how it was made: the path beside it, the parameters and the version in its metadata
+    np.testing.assert_allclose(load_path_json(tmp_path / "out.path.json"), cp)
+    assert meta["n_times"] == 8 and meta["infinity_disparity"] == 0.0
+    saved = meta["saved_metadata"]
+    assert saved["kind"] == "deconvolved" and saved["napari_lfdeblur_version"] == napari_lfdeblur.__version__
+    assert saved["parameters"]["weight"] == 0.0 and saved["parameters"]["method"] == "tv"
+    # an existing output (or path beside it) is kept unless --overwrite
     assert main(["deconvolve", str(src), str(path_file), str(out)]) == 2
     assert "exists" in capsys.readouterr().err
+    out.rename(tmp_path / "kept.npz")
+    assert main(["deconvolve", str(src), str(path_file), str(out)]) == 2
+    assert "out.path.json exists" in capsys.readouterr().err and not out.exists()
     assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--method", "tv",
                  "--iterations", "3", "--device", "cpu"]) == 0
     # colour: the colour TV unless --separate-channels

@@ -1,4 +1,5 @@
-"""``lfdeblur info`` on a camera path file (``.json``): what the path does, in the model's units."""
+"""What the ``lfdeblur`` command says about paths and results: ``lfdeblur info`` on a camera path file
+(``.json``), the notes it prints, the metadata it stores with a light field it computed."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["describe_path_file", "rotation_note"]
+__all__ = ["describe_path_file", "result_metadata", "rotation_note"]
 
 #: Instants a path is sampled at when its file does not state ``n_times`` (the command's default)
 DEFAULT_N_TIMES = 32
@@ -69,3 +70,11 @@ def rotation_note(cp) -> str:
     if cp.ndim != 2 or cp.shape[1] != 6:
         return ""
     return f" (6-DOF, rotation up to {1000 * float(np.abs(cp[:, 3:]).max()):.2f} mrad)"
+
+
+def result_metadata(kind: str, parameters: dict, **fields) -> dict:
+    """The metadata stored with a light field the command computed: its ``kind``, ``fields`` (``n_times``,
+    ``infinity_disparity``, ...), the ``parameters`` and the package version (as a napari layer's)."""
+    from . import __version__
+
+    return {"kind": kind, **fields, "parameters": dict(parameters), "napari_lfdeblur_version": __version__}

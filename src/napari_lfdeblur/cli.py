@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
-from ._cli_info import describe_path_file, rotation_note
+from ._cli_info import describe_path_file, result_metadata, rotation_note
 from ._cli_types import angular_crop, fraction, gib, value_range
 from ._lightfield import DARK_LEVEL, brightest
 
@@ -219,7 +219,6 @@ def _stated_infinity_disparity(given, meta: dict, source) -> float:
 def _run_deblur(args):
     from .blind import BlindParams, iter_blind_deblur
     from .progress import run_to_completion
-    from . import __version__
     from .io import write_lightfield
     from .io._write import sidecar_path_json
     from .path import save_path_json
@@ -268,9 +267,8 @@ def _run_deblur(args):
         bar.close()
     fields = dict(n_times=params.n_times, infinity_disparity=d_inf, motion=params.motion)
     write_lightfield(out, result.lightfield, overwrite=args.overwrite, control_points=result.control_points,
-                     metadata={"kind": "deblurred (blind)", **fields, "preset": None if args.params else args.preset,
-                               "parameters": params.to_dict(), "timings": result.timings,
-                               "napari_lfdeblur_version": __version__})
+                     metadata=result_metadata("deblurred (blind)", params.to_dict(), **fields, timings=result.timings,
+                                              preset=None if args.params else args.preset))
     if extra_file is not None:
         save_path_json(extra_file, result.control_points, overwrite=True, **fields)
     if "message" in result.info:
@@ -409,12 +407,14 @@ def _run_deconvolve(args):
 
     from .deconvolution import iter_deconvolve
     from .io import write_lightfield
+    from .io._write import sidecar_path_json
     from .path import load_path_json
     from .progress import run_to_completion
 
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        raise CLIError(f"{out} exists; pass --overwrite to replace it")
+    for target in (out, sidecar_path_json(out)):  # the result, and the path it was restored with
+        if target.exists() and not args.overwrite:
+            raise CLIError(f"{target} exists; pass --overwrite to replace it")
     cp = load_path_json(args.path_json)
     try:
         doc = json.loads(Path(args.path_json).read_text())
@@ -427,11 +427,9 @@ def _run_deconvolve(args):
         given = float(doc["infinity_disparity"])
     blurred, meta = _read(args)
     d_inf = _stated_infinity_disparity(given, meta, args.input)
-    gen = iter_deconvolve(
-        blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device,
-        method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
-        couple_channels=not args.separate_channels, saturation=not args.no_saturation,
-    )
+    options = dict(method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
+                   couple_channels=not args.separate_channels, saturation=not args.no_saturation)
+    gen = iter_deconvolve(blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device, **options)
     # no bar and no time left: the solve usually stops well before its last iteration, when the objective settles
     bar = _progress(total=args.iterations, desc="deconvolve", unit="it",
                     bar_format="{desc}: iteration {n_fmt} of at most {total_fmt} [{elapsed}, {rate_fmt}{postfix}]")
@@ -452,7 +450,8 @@ def _run_deconvolve(args):
         gen.close()
         bar.close()
     rec = last[-1]
-    write_lightfield(out, result, overwrite=args.overwrite)
+    write_lightfield(out, result, overwrite=args.overwrite, control_points=cp,
+                     metadata=result_metadata("deconvolved", options, n_times=n_times, infinity_disparity=d_inf))
     print(f"wrote {out} {result.shape} ({rec.stage}, {rec.iteration} iteration(s))")
 
 
