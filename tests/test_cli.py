@@ -205,6 +205,24 @@ def test_info_describes_a_camera_path_file(tmp_path, capsys):
     assert "bad.json" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
+def test_info_describes_a_batch_output_folder(tmp_path, capsys):
+    # the last record of each output counts (a.npz failed, then was redone)
+    def rec(output, status, **extra):
+        return json.dumps({"kind": "deblur", "version": "9.9", "output": output, "status": status,
+                           "error": None if status == "ok" else "OSError: disk full", **extra})
+
+    lines = [rec("a.npz", "failed"), rec("a.npz", "ok", blur_found=True, restoration="full"),
+             rec("b.npz", "ok", blur_found=False, restoration="light"),
+             rec("c.npz", "ok", blur_found=False, restoration="none"), rec("d.npz", "failed"), '{"truncated']
+    (tmp_path / "manifest.jsonl").write_text("\n".join(lines) + "\n")
+    assert main(["info", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "(lfdeblur batch deblur; napari-lfdeblur 9.9)" in out and "4 in the manifest: 3 done, 1 failed" in out
+    assert "failed:      d.npz: OSError: disk full" in out and "a.npz" not in out
+    assert "blur found:  in 1 of 3; 1 with little blur found, returned unchanged" in out and "restored lightly" in out
+    assert "redoes the failed items" in out
+
+
 @pytest.mark.parametrize("motion", [None, "3dof", "6dof"])
 def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, tmp_path, monkeypatch, motion):
     from napari_lfdeblur import blind

@@ -1,5 +1,6 @@
 """What the ``lfdeblur`` command says about paths and results: ``lfdeblur info`` on a camera path file
-(``.json``), the notes it prints, the metadata it stores with a light field it computed."""
+(``.json``) or a batch output folder, the notes it prints, the metadata it stores with a light field it
+computed."""
 
 from __future__ import annotations
 
@@ -8,10 +9,51 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["describe_path_file", "result_metadata", "rotation_note"]
+__all__ = ["describes", "describe", "describe_path_file", "describe_batch_folder", "result_metadata",
+           "rotation_note"]
 
 #: Instants a path is sampled at when its file does not state ``n_times`` (the command's default)
 DEFAULT_N_TIMES = 32
+
+
+def describes(path) -> bool:
+    """Whether :func:`describe` takes ``path``: a ``.json`` file, or a folder with a batch manifest."""
+    path = Path(path)
+    return path.suffix.lower() == ".json" or (path / "manifest.jsonl").is_file()
+
+
+def describe(path) -> list[str]:
+    """:func:`describe_batch_folder` for a folder, else :func:`describe_path_file`."""
+    return describe_batch_folder(path) if Path(path).is_dir() else describe_path_file(path)
+
+
+def describe_batch_folder(out_dir) -> list[str]:
+    """Lines that describe a folder written by ``lfdeblur batch``, from its manifest.
+
+    The items (the last record of each output), how many are done and how
+    many failed (with the first errors), and for ``deblur`` what the
+    evidence test decided.
+    """
+    from ._cli_batch import weak_blur_summary
+    from .batch import read_manifest
+
+    records = list(read_manifest(out_dir).values())
+    kinds = sorted({str(r.get("kind")) for r in records})
+    versions = sorted({str(r.get("version")) for r in records})
+    status = [r.get("status") for r in records]
+    lines = [f"batch:       {out_dir} (lfdeblur batch {', '.join(kinds) or '?'}; napari-lfdeblur "
+             f"{', '.join(versions) or '?'})",
+             f"items:       {len(records)} in the manifest: {status.count('ok')} done, {status.count('failed')} failed"]
+    failed = [r for r in records if r.get("status") == "failed"]
+    lines += [f"failed:      {r.get('output')}: {r.get('error')}" for r in failed[:5]]
+    if len(failed) > 5:
+        lines.append(f"             ... and {len(failed) - 5} more (manifest.jsonl)")
+    found = [r.get("blur_found") for r in records if r.get("status") == "ok" and "blur_found" in r]
+    if found:
+        lines.append(f"blur found:  in {found.count(True)} of {len(found)}{weak_blur_summary(records)}")
+    if failed:
+        lines.append("rerun:       the command in README.md there redoes the failed items (and skips the done ones)")
+    return lines
 
 
 def describe_path_file(path) -> list[str]:

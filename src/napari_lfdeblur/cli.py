@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
-from ._cli_info import describe_path_file, result_metadata, rotation_note
+from ._cli_info import describe, describes, result_metadata, rotation_note
 from ._cli_types import angular_crop, fraction, gib, value_range
 from ._lightfield import DARK_LEVEL, brightest
 
@@ -324,9 +324,9 @@ def _run_demo(args):
 
 
 def _add_info(sub):
-    p = sub.add_parser("info", help="describe a light field (layout, shape, dtype, value range, metadata) or a "
-                       "camera path .json (motion, extent, rotation)")
-    _input_argument(p, "light field file or folder, or a camera path .json")
+    p = sub.add_parser("info", help="describe a light field (layout, shape, dtype, value range, metadata), a "
+                       "camera path .json (motion, extent, rotation) or a batch output folder (items, failures)")
+    _input_argument(p, "light field file or folder, camera path .json, or lfdeblur batch output folder")
     p.add_argument("--layout", default=None, help="override the detected layout (views, hci, stanford, eslf, "
                    "mosaic, mat, h5, npy, npz, tiff)")
     p.add_argument("--grid", default=None, help="V,U view grid (mosaic layout)")
@@ -338,8 +338,8 @@ def _run_info(args):
 
     import numpy as np
 
-    if Path(args.input).suffix.lower() == ".json":
-        print("\n".join(describe_path_file(args.input)))
+    if describes(args.input):  # a camera path file, a batch output folder
+        print("\n".join(describe(args.input)))
         return
     options = {"layout": args.layout}
     if args.grid:
