@@ -227,7 +227,7 @@ def _run_deblur(args):
     path_file = sidecar_path_json(out)  # where reading the result back finds its path
     extra_file = Path(args.path_out) if args.path_out else None
     rejected_file = (extra_file.with_name(extra_file.stem + "_rejected" + extra_file.suffix) if extra_file else
-                     out.with_name((out.name[: -len(out.suffix)] if out.suffix else out.name) + ".path_rejected.json"))
+                     out.with_name(out.stem + ".path_rejected.json"))
     for target in (out, path_file, extra_file, rejected_file):
         if target is not None and target.exists() and not args.overwrite:
             raise CLIError(f"{target} exists; pass --overwrite to replace it")
