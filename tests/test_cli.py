@@ -205,6 +205,24 @@ def test_info_describes_a_camera_path_file(tmp_path, capsys):
     assert "bad.json" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
+def test_an_output_of_unknown_format_is_refused_before_any_solve(lf_file, tmp_path, monkeypatch, capsys):
+    from napari_lfdeblur import blind, deconvolution
+
+    _, src = lf_file
+
+    def never(*args, **kwargs):
+        raise AssertionError("the solve ran")
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", never)
+    monkeypatch.setattr(deconvolution, "iter_deconvolve", never)
+    save_path_json(tmp_path / "p.json", linear_path(1.0))
+    for args in (["deblur", str(src), str(tmp_path / "o.png")],
+                 ["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "o.jpg")]):
+        assert main(args) == 2
+        assert "cannot tell the format from the suffix" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lf.npy", "p.json"]
+
+
 def test_info_describes_a_batch_output_folder(tmp_path, capsys):
     # the last record of each output counts (a.npz failed, then was redone)
     def rec(output, status, **extra):
