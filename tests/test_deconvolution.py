@@ -725,6 +725,7 @@ def test_cli_deconvolve(tmp_path, capsys):
     saved = meta["saved_metadata"]
     assert saved["kind"] == "deconvolved" and saved["napari_lfdeblur_version"] == napari_lfdeblur.__version__
     assert saved["parameters"]["weight"] == 0.0 and saved["parameters"]["method"] == "tv"
+    assert saved["parameters"]["weight_used"] == 0.0
     # an existing output (or path beside it) is kept unless --overwrite
     assert main(["deconvolve", str(src), str(path_file), str(out)]) == 2
     assert "exists" in capsys.readouterr().err
@@ -749,6 +750,15 @@ def test_cli_deconvolve(tmp_path, capsys):
         np.testing.assert_allclose(read_lightfield(out), ref, atol=1e-5)
     assert not np.allclose(ref, deconvolve(bright, cp, n_times=8, n_iter=3))
     np.savez(src, lf=blurred)
+    # the weight the rule chose is stored with the result: given back, it restores the same light field
+    assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--iterations", "4"]) == 0
+    chosen, meta = read_lightfield_with_metadata(out)
+    used = meta["saved_metadata"]["parameters"]
+    assert used["weight"] is None and used["weight_used"] > 0 and used["noise_sigma"] > 0
+    assert f"weight {used['weight_used']!r})" in capsys.readouterr().out
+    assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--iterations", "4",
+                 "--weight", repr(used["weight_used"])]) == 0
+    np.testing.assert_array_equal(read_lightfield(out), chosen)
     # bad input: one line, exit status 2
     assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--weight", "-1"]) == 2
     assert "weight" in capsys.readouterr().err

@@ -450,9 +450,10 @@ def _run_deconvolve(args):
         gen.close()
         bar.close()
     rec = last[-1]
-    write_lightfield(out, result, overwrite=args.overwrite, control_points=cp,
-                     metadata=result_metadata("deconvolved", options, n_times=n_times, infinity_disparity=d_inf))
-    print(f"wrote {out} {result.shape} ({rec.stage}, {rec.iteration} iteration(s))")
+    used = {"weight_used": rec.info.get("weight"), "noise_sigma": rec.info.get("sigma")}  # the weight rule's choice
+    write_lightfield(out, result, overwrite=args.overwrite, control_points=cp, metadata=result_metadata(
+        "deconvolved", {**options, **used}, n_times=n_times, infinity_disparity=d_inf))
+    print(f"wrote {out} {result.shape} ({rec.stage}, {rec.iteration} iteration(s), weight {used['weight_used']})")
 
 
 # ------------------------------------------------------------------ main
