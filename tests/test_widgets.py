@@ -250,7 +250,11 @@ def test_deconvolve_tv_with_path_from_path_layer(make_napari_viewer, qtbot, lf, 
     out = viewer.layers["b deconvolved"].data
     ref = deconvolve(blurred, cp, n_times=6, method="tv", weight=None, n_iter=5)  # the default noise rule
     np.testing.assert_allclose(out, ref, atol=1e-5)
-    assert viewer.layers["b deconvolved"].metadata["parameters"]["weight"] is None
+    params = viewer.layers["b deconvolved"].metadata["parameters"]
+    assert params["weight"] is None and params["noise_sigma"] > 0
+    # the weight the rule chose is kept: given back, it restores the same light field
+    np.testing.assert_allclose(deconvolve(blurred, cp, n_times=6, method="tv", weight=params["weight_used"], n_iter=5),
+                               out, atol=1e-6)
 
 
 @pytest.mark.parametrize("box", ["couple_channels", "saturation"], ids=["colour TV", "saturated samples"])

@@ -14,8 +14,9 @@ arguments: ``n_times``, ``infinity_disparity``, ``method``, ``weight`` (None whe
 - a path JSON file (``path_source.json_file``);
 - or typed into the table.
 
-Running it adds ``'<source> deconvolved'`` with the parameters, the path and
-the package version in its metadata.
+Running it adds ``'<source> deconvolved'`` with the parameters (and the weight
+the solve used, ``weight_used``, with ``noise_sigma``), the path and the
+package version in its metadata.
 """
 
 from __future__ import annotations
@@ -128,13 +129,18 @@ class DeconvolveWidget(SolverWidget):
         self._job = {"source": layer.name, "cp": cp, "params": p}
         return lambda: gen
 
+    def on_progress(self, progress) -> None:
+        """Keep the weight the solve uses (the noise rule's choice when ``weight`` is None) for the result."""
+        if "weight" in progress.info:
+            self._job["used"] = {"weight_used": progress.info["weight"], "noise_sigma": progress.info.get("sigma")}
+
     def on_result(self, result) -> None:
         job = self._job
         p = job["params"]
         name = f"{job['source']} deconvolved"
         meta = lightfield_metadata(
             kind="deconvolved",
-            parameters={**p, "operation": "deconvolve"},
+            parameters={**p, **job.get("used", {}), "operation": "deconvolve"},
             control_points=job["cp"],
             n_times=p["n_times"],
             infinity_disparity=p["infinity_disparity"],
