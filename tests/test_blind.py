@@ -137,6 +137,20 @@ def test_result_gauge_and_range(linear_case, linear_result):
     assert set(res.timings) >= {"path", "final", "total"}
 
 
+def test_the_final_stage_reports_its_weight_which_reproduces_the_result(linear_case, linear_result):
+    from napari_lfdeblur.deconvolution import deconvolve, estimate_noise_sigma
+
+    _, _, blurred = linear_case
+    res = linear_result
+    final = res.params.final
+    # the noise rule, as the deconvolution documents it, on the blurred data
+    assert res.info["final_weight"] == pytest.approx(final.effective_weight(final.method, estimate_noise_sigma(blurred),
+                                                                            1))
+    again = deconvolve(blurred, res.control_points, n_times=res.params.final_n_times,
+                       params=final.replace(weight=res.info["final_weight"]), device="cpu")
+    np.testing.assert_allclose(again, res.lightfield, atol=1e-5)
+
+
 def test_clear_blur_is_found_with_its_evidence(linear_result):
     info = linear_result.info
     assert info["blur_found"] is True and "blur found" in info["message"] and info["restoration"] == "full"
@@ -950,6 +964,14 @@ def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys, monkeypatch):
     assert "blur found" in capsys.readouterr().out  # the verdict of the evidence test is printed
     cp = load_path_json(tmp_path / "sharp.path.json")
     assert cp.shape[1] == 3
+    # the API's result, with the final stage's weight in the file's metadata
+    from napari_lfdeblur.io import read_lightfield_with_metadata
+
+    res = blind_deblur(blurred, params=BlindParams.from_json(params.read_text()), device="cpu", seed=0)
+    got, meta = read_lightfield_with_metadata(out)
+    np.testing.assert_allclose(got, res.lightfield, atol=1e-6)
+    np.testing.assert_allclose(cp, res.control_points, atol=1e-9)
+    assert meta["saved_metadata"]["final_weight"] == res.info.get("final_weight")
     # existing output without --overwrite: a one-line error, status 2
     assert main(["deblur", str(src), str(out), "--params", str(params)]) == 2
     assert "exists" in capsys.readouterr().err

@@ -219,8 +219,7 @@ def _stated_infinity_disparity(given, meta: dict, source) -> float:
 def _run_deblur(args):
     from .blind import BlindParams, iter_blind_deblur
     from .progress import run_to_completion
-    from .io import write_lightfield
-    from .io._write import sidecar_path_json
+    from .io._write import sidecar_path_json, write_lightfield
     from .path import save_path_json
 
     out = Path(args.output)
@@ -268,7 +267,8 @@ def _run_deblur(args):
     fields = dict(n_times=params.n_times, infinity_disparity=d_inf, motion=params.motion)
     write_lightfield(out, result.lightfield, overwrite=args.overwrite, control_points=result.control_points,
                      metadata=result_metadata("deblurred (blind)", params.to_dict(), **fields, timings=result.timings,
-                                              preset=None if args.params else args.preset))
+                                              preset=None if args.params else args.preset,
+                                              final_weight=result.info.get("final_weight")))
     if extra_file is not None:
         save_path_json(extra_file, result.control_points, overwrite=True, **fields)
     if "message" in result.info:

@@ -424,7 +424,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
     t1 = time.perf_counter()
     del g, gs
     if p.final is not None and (restore or light):
-        out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages)
+        out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages, info)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()
     t2 = time.perf_counter()
@@ -432,8 +432,9 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
                        params=p, timings={"path": t1 - t0, "final": t2 - t1, "total": t2 - t0}, info=info)
 
 
-def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
-    """The final non-blind stage over the whole light field (tile by tile when memory is short)."""
+def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path, info):
+    """The final non-blind stage over the whole light field (tile by tile when memory is short); its weight
+    goes to ``info['final_weight']``."""
     from ..deconvolution import estimate_noise_sigma, iter_deconvolve
 
     Y, X = arr.shape[2:4]
@@ -442,6 +443,7 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path):
         n_channels = arr.shape[4] if arr.ndim == 5 else 1
         final = final.replace(weight=final.effective_weight(final.method, estimate_noise_sigma(arr), n_channels))
         release_host_memory()  # the noise estimate's work, before the final stage allocates its own
+    info["final_weight"] = final.weight
     if tile is None:
         parts = [((slice(None), slice(None)), (slice(None), slice(None)))]
         out = None

@@ -467,8 +467,8 @@ class BlindResult:
         returned) and, when no significant blur was found,
         ``'rejected_path'`` (the path estimated; ``control_points`` is then
         the path restored with, zero when ``lightfield`` is the input);
-        ``'brightest'`` (the input's centre view's 99.9th percentile).
-    """
+        ``'brightest'`` (the input's centre view's 99.9th percentile);
+        ``'final_weight'`` (the final stage's weight, when it ran)."""
 
     lightfield: np.ndarray
     control_points: np.ndarray

@@ -303,6 +303,8 @@ class BlindDeblurWidget(SolverWidget):
         )
         if "message" in (getattr(result, "info", None) or {}):
             meta["blur_evidence"] = result.info["message"]
+        if (getattr(result, "info", None) or {}).get("final_weight") is not None:
+            meta["final_weight"] = result.info["final_weight"]  # the final stage's weight (the noise rule's choice)
         path_name = f"{job['source']} estimated path"
         self._adopt_previews(name, path_name)
         out = add_layer(self.viewer, lightfield_layer_data(result.lightfield, name=name, metadata=meta))
