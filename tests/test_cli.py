@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import napari_lfdeblur
-from napari_lfdeblur import read_lightfield, read_lightfield_with_metadata, simulate_blur
+from napari_lfdeblur import read_lightfield, read_lightfield_with_metadata, simulate_blur, write_lightfield
 from napari_lfdeblur.blind import BlindParams
 from napari_lfdeblur.cli import main
 from napari_lfdeblur.path import linear_path, load_path_json, preset_path, save_path_json
@@ -155,8 +155,6 @@ def test_simulate_states_t_and_infinity_disparity_and_deblur_uses_it(lf_file, tm
     assert doc["infinity_disparity"] == 0.5 and doc["n_times"] == 8
     # a file that states an impossible d_inf: deblur takes it from the file, and refuses it in one line
     lf = np.random.default_rng(1).random((5, 5, 12, 12)).astype(np.float32)
-    from napari_lfdeblur import write_lightfield
-
     write_lightfield(tmp_path / "far.npz", lf, metadata={"infinity_disparity": 100.0})
     capsys.readouterr()
     assert main(["deblur", str(tmp_path / "far.npz"), str(tmp_path / "o.npz"), "--device", "cpu"]) == 2
@@ -198,6 +196,12 @@ def test_info_describes_a_camera_path_file(tmp_path, capsys):
     save_path_json(tmp_path / "still.json", np.zeros((3, 3)))
     assert main(["info", str(tmp_path / "still.json")]) == 0
     assert "this path does not blur" in capsys.readouterr().out
+    # a light field that holds its path: described with it
+    write_lightfield(tmp_path / "b.npz", np.zeros((3, 3, 4, 4), np.float32), metadata={"n_times": 5},
+                     control_points=linear_path(length=2.0, angle_deg=30.0))
+    assert main(["info", str(tmp_path / "b.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "camera path:\n  motion:      3-DOF, 2 control points" in out and "  extent:      2 views" in out
     # not a path: one line, no traceback
     (tmp_path / "bad.json").write_text('{"control_points": [[1, 2]]}')
     assert main(["info", str(tmp_path / "bad.json")]) == 2

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["describes", "describe", "describe_path_file", "describe_batch_folder", "result_metadata",
-           "rotation_note"]
+__all__ = ["describes", "describe", "describe_lightfield", "describe_path", "describe_path_file",
+           "describe_batch_folder", "result_metadata", "rotation_note"]
 
 #: Instants a path is sampled at when its file does not state ``n_times`` (the command's default)
 DEFAULT_N_TIMES = 32
@@ -56,13 +56,41 @@ def describe_batch_folder(out_dir) -> list[str]:
     return lines
 
 
-def describe_path_file(path) -> list[str]:
-    """Lines that describe the camera path in the JSON file ``path`` (as ``save_path_json`` writes it).
+def describe_lightfield(lf: np.ndarray, meta: dict, stretched: bool = False) -> list[str]:
+    """Lines that describe a light field read with its metadata (``read_lightfield_with_metadata``'s pair).
 
-    The motion (3- or 6-DOF), the in-plane extent (the largest distance
-    between two positions of ``(p_x, p_y)`` over the exposure, views), the
-    distance travelled (views), the range of ``p_z`` over the exposure and
-    the largest rotation of the control points, then the file's other fields.
+    Layout, shape, dtype, value range, the share of saturated samples, a note
+    when the data are dark (unless ``stretched``: read with a value range),
+    the camera path its metadata holds (:func:`describe_path`), then the
+    other metadata.
+    """
+    from ._lightfield import DARK_LEVEL, brightest
+
+    lines = [f"path:        {meta['source']}", f"layout:      {meta['layout']}",
+             f"shape:       {lf.shape}  (V, U, Y, X{', C' if lf.ndim == 5 else ''})",
+             f"dtype:       {lf.dtype} (stored as {meta.get('file_dtype', '?')})",
+             f"value range: [{float(lf.min()):.6g}, {float(lf.max()):.6g}], mean {float(lf.mean()):.6g}"]
+    at_top = float(np.mean(lf >= 1.0))
+    if at_top > 0:
+        lines.append(f"saturated:   {100 * at_top:.3g} % of the samples are at 1 (deconvolution fits them as clipped "
+                     "by the sensor: the light there reached at least 1)")
+    bright = brightest(lf)
+    if bright < DARK_LEVEL and not stretched:
+        lines.append(f"note:        dark: 99.9 % of the centre view is below {bright:.3g} (10- or 12-bit data in a "
+                     "16-bit file? a linear decode?); the blind solver finds few edges in dark data: --value-range "
+                     "auto or LO,HI stretches it")
+    if meta.get("control_points") is not None:
+        lines.append("camera path:")
+        lines += ["  " + line for line in describe_path(meta["control_points"], meta.get("n_times"))]
+    rest = {k: v for k, v in meta.items() if k not in ("source", "layout", "shape", "dtype", "file_dtype")}
+    lines.append("metadata:" + ("" if rest else "    (none)"))
+    lines += [f"  {key}: {json.dumps(value, default=str)}" for key, value in rest.items()]
+    return lines
+
+
+def describe_path_file(path) -> list[str]:
+    """Lines that describe the camera path in the JSON file ``path`` (as ``save_path_json`` writes it):
+    :func:`describe_path`, then the file's other fields.
 
     Raises
     ------
@@ -70,20 +98,36 @@ def describe_path_file(path) -> list[str]:
         As :func:`~napari_lfdeblur.path.load_path_json` (a missing file, bad
         JSON, no or malformed control points).
     """
-    from .path import bezier_positions, load_path_json
+    from .path import load_path_json
 
     cp = load_path_json(path)
     doc = json.loads(Path(path).read_text())
     extra = {k: v for k, v in doc.items() if k not in ("control_points", "units")} if isinstance(doc, dict) else {}
-    n_times = extra.get("n_times", DEFAULT_N_TIMES)
+    lines = [f"path:        {path}", *describe_path(cp, extra.get("n_times"))]
+    lines.append("fields:" + ("" if extra else "      (none)"))
+    lines += [f"  {key}: {json.dumps(value, default=str)}" for key, value in extra.items()]
+    return lines
+
+
+def describe_path(cp, n_times=None) -> list[str]:
+    """Lines that describe a camera path ``cp`` ``(n, 3)`` or ``(n, 6)`` sampled at ``n_times`` instants.
+
+    The motion (3- or 6-DOF), the in-plane extent (the largest distance
+    between two positions of ``(p_x, p_y)`` over the exposure, views), the
+    distance travelled (views), the range of ``p_z`` over the exposure and
+    the largest rotation of the control points. ``n_times`` that is not an
+    integer >= 2 (None: not stated) counts as :data:`DEFAULT_N_TIMES`.
+    """
+    from .path import bezier_positions, validate_control_points
+
+    cp = validate_control_points(cp)
     n_times = n_times if isinstance(n_times, int) and n_times >= 2 else DEFAULT_N_TIMES
     pos = bezier_positions(cp, n_times)
     xy = pos[:, :2]
     extent = float(np.linalg.norm(xy[:, None] - xy[None], axis=-1).max())
     travelled = float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
     six = cp.shape[1] == 6
-    lines = [f"path:        {path}",
-             f"motion:      {'6-DOF' if six else '3-DOF'}, {len(cp)} control points "
+    lines = [f"motion:      {'6-DOF' if six else '3-DOF'}, {len(cp)} control points "
              f"({'p_x, p_y, p_z, r_x, r_y, r_z' if six else 'p_x, p_y, p_z'})",
              f"extent:      {extent:.3g} views in (p_x, p_y) over the exposure ({n_times} instants); "
              f"{travelled:.3g} views travelled"]
@@ -97,8 +141,6 @@ def describe_path_file(path) -> list[str]:
                      "points)")
     if extent == 0 and not np.any(cp[:, 2:]):
         lines.append("note:        the camera does not move: this path does not blur")
-    lines.append("fields:" + ("" if extra else "      (none)"))
-    lines += [f"  {key}: {json.dumps(value, default=str)}" for key, value in extra.items()]
     return lines
 
 

@@ -15,9 +15,8 @@ import sys
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
-from ._cli_info import describe, describes, result_metadata, rotation_note
+from ._cli_info import describe, describe_lightfield, describes, result_metadata, rotation_note
 from ._cli_types import angular_crop, fraction, gib, value_range
-from ._lightfield import DARK_LEVEL, brightest
 
 __all__ = ["main"]
 
@@ -334,10 +333,6 @@ def _add_info(sub):
 
 
 def _run_info(args):
-    import json
-
-    import numpy as np
-
     if describes(args.input):  # a camera path file, a batch output folder
         print("\n".join(describe(args.input)))
         return
@@ -350,24 +345,7 @@ def _run_info(args):
     if args.angular_size:
         options["angular_size"] = args.angular_size
     lf, meta = _read(args, **options)
-    print(f"path:        {meta['source']}")
-    print(f"layout:      {meta['layout']}")
-    print(f"shape:       {lf.shape}  (V, U, Y, X{', C' if lf.ndim == 5 else ''})")
-    print(f"dtype:       {lf.dtype} (stored as {meta.get('file_dtype', '?')})")
-    print(f"value range: [{float(lf.min()):.6g}, {float(lf.max()):.6g}], mean {float(lf.mean()):.6g}")
-    at_top = float(np.mean(lf >= 1.0))
-    if at_top > 0:
-        print(f"saturated:   {100 * at_top:.3g} % of the samples are at 1 (deconvolution fits them as clipped by the "
-              "sensor: the light there reached at least 1)")
-    bright = brightest(lf)
-    if bright < DARK_LEVEL and args.value_range is None:
-        print(f"note:        dark: 99.9 % of the centre view is below {bright:.3g} (10- or 12-bit data in a 16-bit "
-              "file? a linear decode?); the blind solver finds few edges in dark data: --value-range auto or "
-              "LO,HI stretches it")
-    rest = {k: v for k, v in meta.items() if k not in ("source", "layout", "shape", "dtype", "file_dtype")}
-    print("metadata:" + ("" if rest else "    (none)"))
-    for key, value in rest.items():
-        print(f"  {key}: {json.dumps(value, default=str)}")
+    print("\n".join(describe_lightfield(lf, meta, stretched=args.value_range is not None)))
 
 
 # ------------------------------------------------------------ deconvolve
