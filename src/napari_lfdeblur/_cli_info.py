@@ -1,6 +1,6 @@
-"""What the ``lfdeblur`` command says about paths and results: ``lfdeblur info`` on a camera path file
-(``.json``) or a batch output folder, the notes it prints, the metadata it stores with a light field it
-computed."""
+"""What the ``lfdeblur`` command says about light fields, paths and results: ``lfdeblur info`` on a light
+field, a camera path file (``.json``) or a batch output folder, the path notes it prints, the metadata it
+stores with a light field it computed."""
 
 from __future__ import annotations
 
