@@ -186,7 +186,8 @@ def _add_deblur(sub):
                         "(BlindParams.latent.edge_anisotropy; default: the preset's, 0)")
     p.add_argument("--restore-anyway", action="store_true",
                    help="restore with the estimated path even when the data give little evidence of blur "
-                        "(BlindParams.require_evidence=False; default: return the input unchanged then)")
+                        "(BlindParams.require_evidence=False; default: then a light restoration, see "
+                        "--light-restoration, or the input unchanged)")
     p.add_argument("--light-restoration", type=fraction, metavar="FRACTION",
                    help="when the data give little evidence of blur but two parts of them agree on the path, "
                         "restore with the estimated path scaled by FRACTION (in [0, 1]) instead of returning "

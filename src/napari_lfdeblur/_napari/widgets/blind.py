@@ -28,8 +28,8 @@ Cancel stops the solver at its next progress report (in the final stage,
 within the current iteration), removes the preview layers and adds nothing.
 When it finishes, the previews are replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
-timings, package version, and the verdict of the evidence test in
-``blur_evidence``) and ``'<source> estimated path'``. When the data show
+timings, package version, the verdict of the evidence test in
+``blur_evidence`` and the final stage's weight in ``final_weight``) and ``'<source> estimated path'``. When the data show
 little blur, the result is a light restoration or the input with a zero
 path (unless *restore anyway* is ticked), and a notification says why
 (:attr:`napari_lfdeblur.blind.BlindResult.info`).
@@ -128,7 +128,7 @@ def _fields(viewer) -> list:
              "non-blind TV solve (0: return the blurred input with the path)"),
         CheckBox(name="restore_anyway", value=False, label="restore anyway",
                  tooltip="restore with the estimated path even when the data give little evidence of blur "
-                 "(BlindParams.require_evidence=False; default: return the input unchanged then)"),
+                 "(BlindParams.require_evidence=False; unticked: then a light restoration or the input)"),
         fspin("light_restoration", PRESETS["default"].light_restoration, 0.0, 1.0, 0.05, label="light restoration",
               tooltip="when the data give little evidence of blur but two parts of them, estimated apart, agree "
               "on the path, restore with the estimated path scaled by this factor instead of returning the "
