@@ -167,7 +167,7 @@ def test_simulate_shake6_writes_a_6_column_path(lf_file, tmp_path, capsys):
     lf, src = lf_file
     out = tmp_path / "b.npz"
     assert main(["simulate", str(src), str(out), "--path", "shake6:1.5:3:0.02", "--n-times", "8"]) == 0
-    assert "6-DOF, rotation up to 20.00 mrad" in capsys.readouterr().out
+    assert f"T and d_inf: {tmp_path / 'b.path.json'} (6-DOF, rotation up to 20.00 mrad)" in capsys.readouterr().out
     cp = load_path_json(tmp_path / "b.path.json")
     assert cp.shape == (5, 6) and "radians" in (tmp_path / "b.path.json").read_text()
     np.testing.assert_allclose(cp, preset_path("shake6", 1.5, 3, rotation=0.02))

@@ -139,7 +139,7 @@ def _add_simulate(sub):
 
 def _run_simulate(args):
     from .blur import simulate_blur
-    from .io import write_lightfield
+    from .io._write import sidecar_path_json, write_lightfield
 
     out = Path(args.output)
     if out.exists() and not args.overwrite:
@@ -152,7 +152,8 @@ def _run_simulate(args):
     written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp,
                                metadata={"kind": "blurred", "n_times": args.n_times,
                                          "infinity_disparity": args.infinity_disparity})
-    print(f"wrote {written} {blurred.shape}, with its camera path{rotation_note(cp)}, T and d_inf beside it")
+    print(f"wrote {written} {blurred.shape}; its camera path, T and d_inf: {sidecar_path_json(written)}"
+          f"{rotation_note(cp)}")
 
 
 # ---------------------------------------------------------------- deblur
