@@ -315,6 +315,10 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     assert main(args + ["--overwrite", "--path-out", str(tmp_path / "p.json")]) == 0
     np.testing.assert_array_equal(load_path_json(tmp_path / "p.json"), load_path_json(tmp_path / "o.path.json"))
     np.testing.assert_allclose(load_path_json(tmp_path / "p_rejected.json"), rejected)
+    # a --path-out into a missing folder: refused before the solve, the output left as it was
+    before = (tmp_path / "o.npz").stat().st_mtime_ns
+    assert main(args + ["--overwrite", "--path-out", str(tmp_path / "no" / "p.json")]) == 2
+    assert "does not exist" in capsys.readouterr().err and (tmp_path / "o.npz").stat().st_mtime_ns == before
 
 
 def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_path, monkeypatch, capsys):

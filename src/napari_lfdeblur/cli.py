@@ -231,6 +231,8 @@ def _run_deblur(args):
     for target in (out, path_file, extra_file, rejected_file):
         if target is not None and target.exists() and not args.overwrite:
             raise CLIError(f"{target} exists; pass --overwrite to replace it")
+    if extra_file is not None and not extra_file.parent.is_dir():  # found out now, not after the solve
+        raise CLIError(f"--path-out {extra_file}: the folder {extra_file.parent} does not exist")
     if args.params:
         if not Path(args.params).is_file():
             raise CLIError(f"parameter file {args.params} does not exist")
