@@ -209,7 +209,7 @@ def test_info_describes_a_camera_path_file(tmp_path, capsys):
     assert "bad.json" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
-def test_an_output_of_unknown_format_is_refused_before_any_solve(lf_file, tmp_path, monkeypatch, capsys):
+def test_an_output_that_cannot_be_written_is_refused_before_any_solve(lf_file, tmp_path, monkeypatch, capsys):
     from napari_lfdeblur import blind, deconvolution
 
     _, src = lf_file
@@ -224,6 +224,11 @@ def test_an_output_of_unknown_format_is_refused_before_any_solve(lf_file, tmp_pa
                  ["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "o.jpg")]):
         assert main(args) == 2
         assert "cannot tell the format from the suffix" in capsys.readouterr().err
+    # nor into a folder that does not exist
+    for args in (["deblur", str(src), str(tmp_path / "no" / "o.npz")],
+                 ["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "no" / "o.npz")]):
+        assert main(args) == 2
+        assert "the folder" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["lf.npy", "p.json"]
 
 

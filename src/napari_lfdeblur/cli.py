@@ -48,6 +48,16 @@ def _input_argument(p, help_text="light field file or folder"):
                    "floats as they are (they must lie in [0, 1])")
 
 
+def _check_targets(targets, overwrite: bool) -> None:
+    """Refuse, before any work, an output file (None: none) that exists without ``--overwrite``, or whose
+    folder does not exist (unless that folder is one of the outputs: a folder of views and its path.json)."""
+    for target in targets:
+        if target is not None and target.exists() and not overwrite:
+            raise CLIError(f"{target} exists; pass --overwrite to replace it")
+        if target is not None and not target.parent.is_dir() and target.parent not in targets:
+            raise CLIError(f"cannot write {target}: the folder {target.parent} does not exist")
+
+
 def _read(args, **options):
     """Read ``args.input`` (a light field and its metadata), swapping the view axes on ``--swap-views``.
 
@@ -228,11 +238,7 @@ def _run_deblur(args):
     extra_file = Path(args.path_out) if args.path_out else None
     rejected_file = (extra_file.with_name(extra_file.stem + "_rejected" + extra_file.suffix) if extra_file else
                      out.with_name(out.stem + ".path_rejected.json"))
-    for target in (out, path_file, extra_file, rejected_file):
-        if target is not None and target.exists() and not args.overwrite:
-            raise CLIError(f"{target} exists; pass --overwrite to replace it")
-    if extra_file is not None and not extra_file.parent.is_dir():  # found out now, not after the solve
-        raise CLIError(f"--path-out {extra_file}: the folder {extra_file.parent} does not exist")
+    _check_targets([out, path_file, extra_file, rejected_file], args.overwrite)
     if args.params:
         if not Path(args.params).is_file():
             raise CLIError(f"parameter file {args.params} does not exist")
@@ -394,9 +400,7 @@ def _run_deconvolve(args):
     from .progress import run_to_completion
 
     out = Path(args.output)
-    for target in (out, sidecar_path_json(out)):  # the result, and the path it was restored with
-        if target.exists() and not args.overwrite:
-            raise CLIError(f"{target} exists; pass --overwrite to replace it")
+    _check_targets([out, sidecar_path_json(out)], args.overwrite)  # the result, and the path it was restored with
     cp = load_path_json(args.path_json)
     try:
         doc = json.loads(Path(args.path_json).read_text())
