@@ -51,6 +51,8 @@ def test_simulate_with_json_path_and_no_overwrite(lf_file, tmp_path, capsys):
         (["simulate", "{src}", "o.npz", "--path", "nothere.json"], "does not exist"),
         (["simulate", "{src}", "o.npz", "--path", "shake:1:0:0.01"], "only shake6 takes a ROTATION"),
         (["simulate", "{src}", "o.npz", "--path", "shake6:1:0:0.5"], "rotation must be in [0, 0.2]"),
+        (["simulate", "{src}", "no/o.npz", "--path", "linear"], "the folder no does not exist"),
+        (["simulate", "{src}", "o.gif", "--path", "linear"], "cannot tell the format"),
         (["deblur", "{src}", "o.npz", "--preset", "paper", "--motion", "6dof"], "needs method='alternating'"),
     ],
 )

@@ -152,8 +152,7 @@ def _run_simulate(args):
     from .io._write import sidecar_path_json, write_lightfield
 
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        raise CLIError(f"{out} exists; pass --overwrite to replace it")
+    _check_targets([out, sidecar_path_json(out)], args.overwrite)
     cp = _path_argument(args.path)
     lf, _ = _read(args)
     blurred = simulate_blur(
