@@ -203,7 +203,7 @@ def test_info_describes_a_camera_path_file(tmp_path, capsys):
                      control_points=linear_path(length=2.0, angle_deg=30.0))
     assert main(["info", str(tmp_path / "b.npz")]) == 0
     out = capsys.readouterr().out
-    assert "camera path:\n  motion:      3-DOF, 2 control points" in out and "  extent:      2 views" in out
+    assert out.startswith(f"file:        {tmp_path / 'b.npz'}\n") and "camera path:\n  motion:      3-DOF, 2 control points" in out and "  extent:      2 views" in out
     # not a path: one line, no traceback
     (tmp_path / "bad.json").write_text('{"control_points": [[1, 2]]}')
     assert main(["info", str(tmp_path / "bad.json")]) == 2

@@ -66,7 +66,7 @@ def describe_lightfield(lf: np.ndarray, meta: dict, stretched: bool = False) -> 
     """
     from ._lightfield import DARK_LEVEL, brightest
 
-    lines = [f"path:        {meta['source']}", f"layout:      {meta['layout']}",
+    lines = [f"file:        {meta['source']}", f"layout:      {meta['layout']}",
              f"shape:       {lf.shape}  (V, U, Y, X{', C' if lf.ndim == 5 else ''})",
              f"dtype:       {lf.dtype} (stored as {meta.get('file_dtype', '?')})",
              f"value range: [{float(lf.min()):.6g}, {float(lf.max()):.6g}], mean {float(lf.mean()):.6g}"]
@@ -103,7 +103,7 @@ def describe_path_file(path) -> list[str]:
     cp = load_path_json(path)
     doc = json.loads(Path(path).read_text())
     extra = {k: v for k, v in doc.items() if k not in ("control_points", "units")} if isinstance(doc, dict) else {}
-    lines = [f"path:        {path}", *describe_path(cp, extra.get("n_times"))]
+    lines = [f"file:        {path}", *describe_path(cp, extra.get("n_times"))]
     lines.append("fields:" + ("" if extra else "      (none)"))
     lines += [f"  {key}: {json.dumps(value, default=str)}" for key, value in extra.items()]
     return lines
