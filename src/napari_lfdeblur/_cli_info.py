@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["describes", "describe", "describe_lightfield", "describe_path", "describe_path_file",
-           "describe_batch_folder", "result_metadata", "rotation_note"]
+__all__ = ["DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield", "describe_path",
+           "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note"]
 
-#: Instants a path is sampled at when its file does not state ``n_times`` (the command's default)
+#: Instants a path is sampled at when its file does not state ``n_times`` (``info`` and ``deconvolve``)
 DEFAULT_N_TIMES = 32
 
 

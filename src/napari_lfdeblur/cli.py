@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
-from ._cli_info import describe, describe_lightfield, describes, result_metadata, rotation_note
+from ._cli_info import DEFAULT_N_TIMES, describe, describe_lightfield, describes, result_metadata, rotation_note
 from ._cli_types import angular_crop, fraction, gib, value_range
 
 __all__ = ["main"]
@@ -51,11 +51,13 @@ def _input_argument(p, help_text="light field file or folder"):
 def _check_targets(targets, overwrite: bool) -> None:
     """Refuse, before any work, an output file (None: none) that exists without ``--overwrite``, or whose
     folder does not exist (unless that folder is one of the outputs: a folder of views and its path.json)."""
+    from .io._common import check_writable
+
     for target in targets:
         if target is not None and target.exists() and not overwrite:
-            raise CLIError(f"{target} exists; pass --overwrite to replace it")
-        if target is not None and not target.parent.is_dir() and target.parent not in targets:
-            raise CLIError(f"cannot write {target}: the folder {target.parent} does not exist")
+            raise CLIError(f"{target} exists; pass --overwrite to replace it")  # the option's name, not the API's
+        if target is not None and target.parent not in targets:
+            check_writable(target, overwrite=True)  # its folder exists
 
 
 def _read(args, **options):
@@ -393,8 +395,7 @@ def _run_deconvolve(args):
     import json
 
     from .deconvolution import iter_deconvolve
-    from .io import write_lightfield
-    from .io._write import sidecar_path_json
+    from .io._write import sidecar_path_json, write_lightfield
     from .path import load_path_json
     from .progress import run_to_completion
 
@@ -406,7 +407,7 @@ def _run_deconvolve(args):
     except (OSError, ValueError):
         doc = {}
     doc = doc if isinstance(doc, dict) else {}
-    n_times = args.n_times if args.n_times is not None else int(doc.get("n_times", 32))
+    n_times = args.n_times if args.n_times is not None else int(doc.get("n_times", DEFAULT_N_TIMES))
     given = args.infinity_disparity
     if given is None and doc.get("infinity_disparity") is not None:
         given = float(doc["infinity_disparity"])
