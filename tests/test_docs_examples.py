@@ -1,4 +1,5 @@
-"""The code blocks of docs/headless.md and of the README's API section run as written.
+"""The code blocks of docs/headless.md and of the README's API section, and the
+Examples sections of the core modules' docstrings, run as written.
 
 Blocks that import napari run in one subprocess (a viewer per block, closed by
 the block); the others run here. Run under xvfb for the napari blocks:
@@ -71,3 +72,32 @@ def test_viewer_examples_run(tmp_path):
                           cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-6000:]
     assert proc.stdout.count(" ok") == len(blocks)
+
+
+def _modules_with_examples():
+    """The core modules (not ``_napari``, which needs Qt) whose docstrings hold ``>>>`` examples."""
+    src = Path(__file__).resolve().parents[1] / "src"
+    names = []
+    for file in sorted((src / "napari_lfdeblur").rglob("*.py")):
+        parts = file.relative_to(src).with_suffix("").parts
+        if "_napari" in parts or ">>>" not in file.read_text():
+            continue
+        names.append(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+    return names
+
+
+def test_the_package_has_docstring_examples():
+    assert {"napari_lfdeblur.blur", "napari_lfdeblur.deconvolution", "napari_lfdeblur.path"} <= set(
+        _modules_with_examples())
+
+
+@pytest.mark.parametrize("module", _modules_with_examples())
+def test_docstring_examples_run(module, tmp_path, monkeypatch):
+    """Every Examples section of the core modules runs and prints what it shows."""
+    import doctest
+    import importlib
+
+    monkeypatch.chdir(tmp_path)  # examples may write files
+    result = doctest.testmod(importlib.import_module(module), report=False,
+                             optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {module} failed (see above)"

@@ -17,6 +17,7 @@ from napari_lfdeblur import (
     lytro_sample,
     random_path,
     save_path_json,
+    shake_path,
     synthetic_scene,
     vertical_epi,
     view_shifts,
@@ -118,15 +119,6 @@ def test_view_shifts_bad_input():
         view_shifts(np.zeros((3, 3, 4, 32)))
 
 
-def test_epi_module_examples_run():
-    import doctest
-
-    import napari_lfdeblur.epi
-
-    result = doctest.testmod(napari_lfdeblur.epi)
-    assert result.attempted >= 4 and result.failed == 0
-
-
 def test_epis_are_the_right_slices():
     lf = np.arange(3 * 4 * 5 * 6, dtype=np.float32).reshape(3, 4, 5, 6)
     h = horizontal_epi(lf, v=1, y=2)
@@ -164,6 +156,29 @@ def test_presets():
     np.testing.assert_allclose(center_path(arc_path() + 7.0), arc_path(), atol=1e-12)
     with pytest.raises(ValueError, match="unknown path preset"):
         preset_path("zigzag")
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: linear_path(-1.0), "length must be a finite number >= 0; got -1.0"),
+    (lambda: linear_path(2.0, angle_deg=float("nan")), "angle_deg must be a finite number"),
+    (lambda: arc_path(float("inf")), "length must be a finite number >= 0"),
+    (lambda: arc_path(bend="x"), "bend must be a number; got 'x'"),
+    (lambda: random_path(4, extent=-2.0), "extent must be a finite number >= 0"),
+    (lambda: random_path(2.5), "integer number >= 2 of control points; got 2.5"),
+    (lambda: random_path(1), "integer number >= 2 of control points; got 1"),
+    (lambda: shake_path(z=-0.5), "z must be a finite number >= 0"),
+    (lambda: preset_path("linear", extent=float("nan")), "the path's extent must be a finite number >= 0"),
+])
+def test_path_generators_refuse_bad_sizes(make, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        make()
+
+
+def test_path_generators_keep_their_shapes_at_zero_size():
+    # size 0 is allowed and means no motion; a signed z (linear_path) and bend are directions, not sizes
+    assert np.all(linear_path(0.0) == 0) and np.all(random_path(3, extent=0.0) == 0)
+    np.testing.assert_allclose(linear_path(2.0, z=-1.0)[:, 2], [0.5, -0.5])
+    np.testing.assert_allclose(arc_path(2.0, bend=-0.5), arc_path(2.0, bend=0.5) * [1, -1, 1], atol=1e-12)
 
 
 def test_elevate_degree_keeps_the_curve():
