@@ -58,6 +58,18 @@ __all__ = [
 # ---------------------------------------------------------------- presets
 
 
+def _number(name: str, value, minimum: float | None = None) -> float:
+    """``value`` as a finite float (``>= minimum`` when given), or a ValueError naming ``name``."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number; got {value!r}") from None
+    if not math.isfinite(x) or (minimum is not None and x < minimum):
+        bound = "" if minimum is None else f" >= {minimum:g}"
+        raise ValueError(f"{name} must be a finite number{bound}; got {value!r}")
+    return x
+
+
 def linear_path(length: float = 2.0, angle_deg: float = 0.0, z: float = 0.0) -> np.ndarray:
     """A straight in-plane motion of ``length`` views at ``angle_deg``, centred.
 
@@ -66,8 +78,14 @@ def linear_path(length: float = 2.0, angle_deg: float = 0.0, z: float = 0.0) -> 
     Returns
     -------
     ndarray, float64, shape (2, 3)
+
+    Raises
+    ------
+    ValueError
+        If ``length`` is negative, or any argument is not a finite number.
     """
-    a = math.radians(angle_deg)
+    length, z = _number("length", length, 0.0), _number("z", z)
+    a = math.radians(_number("angle_deg", angle_deg))
     d = np.array([math.cos(a), math.sin(a), 0.0]) * length / 2.0
     d[2] = z / 2.0
     return np.stack([-d, d])
@@ -79,8 +97,14 @@ def arc_path(length: float = 2.0, bend: float = 0.5, angle_deg: float = 0.0) -> 
     Returns
     -------
     ndarray, float64, shape (3, 3), in the zero-mean gauge for T = 32
+
+    Raises
+    ------
+    ValueError
+        If ``length`` is negative, or any argument is not a finite number.
     """
-    a = math.radians(angle_deg)
+    length, bend = _number("length", length, 0.0), _number("bend", bend)
+    a = math.radians(_number("angle_deg", angle_deg))
     along = np.array([math.cos(a), math.sin(a), 0.0])
     across = np.array([-math.sin(a), math.cos(a), 0.0])
     cp = np.stack(
@@ -95,8 +119,13 @@ def shake_path(extent: float = 2.0, seed: int = 0, n_points: int = 5, z: float =
     Returns
     -------
     ndarray, float64, shape (n_points, 3), in the zero-mean gauge for T = 32
+
+    Raises
+    ------
+    ValueError
+        As :func:`random_path` (``z`` is its ``z_extent``).
     """
-    return random_path(n_points=n_points, extent=extent, z_extent=z, seed=seed)
+    return random_path(n_points=n_points, extent=extent, z_extent=_number("z", z, 0.0), seed=seed)
 
 
 def random_path(
@@ -110,9 +139,17 @@ def random_path(
     Returns
     -------
     ndarray, float64, shape (n_points, 3)
+
+    Raises
+    ------
+    ValueError
+        If ``n_points`` is not an integer >= 2, or ``extent`` or
+        ``z_extent`` is negative or not a finite number.
     """
-    if n_points < 2:
-        raise ValueError(f"a Bezier path needs at least 2 control points; got {n_points}")
+    if isinstance(n_points, bool) or int(n_points) != n_points or n_points < 2:
+        raise ValueError(f"a Bezier path needs an integer number >= 2 of control points; got {n_points!r}")
+    extent, z_extent = _number("extent", extent, 0.0), _number("z_extent", z_extent, 0.0)
+    n_points = int(n_points)
     rng = np.random.default_rng(seed)
     cp = rng.uniform(-0.5, 0.5, size=(n_points, 3)) * np.array([extent, extent, z_extent])
     return center_path(cp)
@@ -186,9 +223,10 @@ def preset_path(name: str, extent: float = 2.0, seed: int = 0, rotation: float |
     Raises
     ------
     ValueError
-        For an unknown name, or a ``rotation`` given to a preset other than
-        ``shake6``.
+        For an unknown name, a negative or non-finite ``extent``, or a
+        ``rotation`` given to a preset other than ``shake6``.
     """
+    extent = _number("the path's extent", extent, 0.0)
     if rotation is not None and name != "shake6":
         raise ValueError(f"path preset {name!r} has no rotation; use shake6 for a path with rotation")
     if name == "linear":
