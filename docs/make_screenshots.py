@@ -15,7 +15,8 @@ saves the whole window to ``docs/images/``:
 - ``widget_blind.png``: *Blind deblur* of the blurred Lytro crop, with the
   estimated and true paths and the loss curve.
 
-``--quick`` uses smaller light fields and fewer iterations (a smoke test).
+``--quick`` uses smaller light fields and fewer iterations (a smoke test);
+``--out DIR`` saves elsewhere.
 """
 
 from __future__ import annotations
@@ -94,8 +95,7 @@ def simulate_and_deconvolve(quick: bool):
 
     dec = DeconvolveWidget(viewer)
     viewer.window.add_dock_widget(dec, name="4D deconvolution", area="right")
-    dec.layer_combo.set_layer(blurred)  # the path comes from its metadata
-    dec.form.method.value = "auto"  # the arc is in-plane: the exact in-plane solve
+    dec.layer_combo.set_layer(blurred)  # the path comes from its metadata; the default method, 4D TV
     (result,) = dec.run_and_wait(timeout=600)
     dec.epi.layer_combo.set_layer(result)
     dec.epi.set_pick(v=shape[0] // 2, y=shape[2] // 2 + 6, u=shape[1] // 2, x=shape[3] // 2 - 4)
@@ -141,10 +141,13 @@ def blind(quick: bool):
 
 
 def main(argv=None):
+    global OUT
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, few iterations")
     parser.add_argument("--only", choices=["simulate", "blind"], help="make only some screenshots")
+    parser.add_argument("--out", type=Path, default=OUT, help=f"folder to save them in (default {OUT})")
     args = parser.parse_args(argv)
+    OUT = args.out
     np.random.seed(0)
     if args.only in (None, "simulate"):
         simulate_and_deconvolve(args.quick)

@@ -843,3 +843,14 @@ def test_progress_panel_promises_no_time_left_to_a_solve_that_stops_when_it_sett
                                    info={"relative_decrease": 3e-4}))
     assert "left" not in panel.status.value and "decreasing by 3.0e-04" in panel.status.value
     assert panel.eta_seconds is None
+
+
+def test_loss_plot_counts_iterations_in_whole_numbers(qtbot):
+    from napari_lfdeblur._napari.widgets._plots import LossPlot
+
+    plot = LossPlot()
+    plot.plot([4e-4, 5e-5, 3e-5])  # three iterations: matplotlib alone would tick 1.00, 1.25, ...
+    plot.figure.canvas.draw()
+    ticks = [t for t in plot.ax.get_xticks() if 1 <= t <= 3]
+    assert ticks and all(float(t).is_integer() for t in ticks)
+    assert plot.ax.get_yscale() == "log"

@@ -147,6 +147,8 @@ class LossPlot(_PlotWidget):
 
         ``live``: a quick redraw during a run.
         """
+        from matplotlib.ticker import MaxNLocator
+
         self.values = [float(v) for v in values]
         if stage_starts is not None:
             self.stage_starts = list(stage_starts)
@@ -161,6 +163,7 @@ class LossPlot(_PlotWidget):
             for start in self.stage_starts:
                 if 0 < start < len(vals):
                     ax.axvline(start + 0.5, color="0.6", ls=":", lw=0.8)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # iterations are counted: no 1.25
         self._finish("path iteration (dotted: new level / start)", "loss", live)
 
     def reset(self) -> None:
