@@ -28,6 +28,35 @@ def test_core_imports_neither_qt_nor_napari():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+def test_widgets_module_is_the_manifests_widgets():
+    """napari_lfdeblur.widgets, the scripting entry, holds the very classes the plugin menu opens."""
+    import importlib
+
+    from npe2 import PluginManifest
+
+    import napari_lfdeblur.widgets as widgets
+
+    manifest = PluginManifest.from_file(ROOT / "napari.yaml")
+    commands = {c.id: c.python_name for c in manifest.contributions.commands}
+    opened = set()
+    for contribution in manifest.contributions.widgets:
+        module, _, attr = commands[contribution.command].partition(":")
+        opened.add(getattr(importlib.import_module(module), attr))
+    listed = {getattr(widgets, name) for name in widgets.__all__}
+    assert opened and opened <= listed
+    assert all(hasattr(widgets, name) for name in widgets.__all__)
+
+
+def test_widgets_module_says_what_it_needs_without_napari():
+    code = (
+        "import sys; sys.modules['napari'] = None\n"
+        "try:\n    import napari_lfdeblur.widgets\n"
+        "except ImportError as e:\n    print(e)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout
+    assert 'napari_lfdeblur.widgets needs napari and Qt' in out and 'napari-lfdeblur[napari]' in out
+
+
 def test_manifest_symlink_and_name():
     link = ROOT / "src" / "napari_lfdeblur" / "napari.yaml"
     assert link.is_symlink() and link.resolve() == (ROOT / "napari.yaml").resolve()
