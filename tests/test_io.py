@@ -445,6 +445,30 @@ def test_writer_camera_path_json(tmp_path, lf_gray):
     np.testing.assert_allclose(load_path_json(tmp_path / "views" / "path.json"), cp)
 
 
+@pytest.mark.parametrize("name, layout", [("res.npz", None), ("res.npy", None), ("res.tif", None), ("res.h5", None),
+                                          ("res.eslf.png", "eslf"), ("views", None)])
+def test_every_format_reads_back_the_path_written_with_it(tmp_path, lf_gray, name, layout):
+    """The path, T and d_inf that write_lightfield stores come back from read_lightfield_with_metadata."""
+    cp = np.array([[0.0, 0.0, 0.0], [1.5, -0.5, 0.1], [2.0, 1.0, 0.0]])
+    written = write_lightfield(tmp_path / name, lf_gray[:3, :3], control_points=cp, layout=layout,
+                               metadata={"n_times": 12, "infinity_disparity": -0.5})
+    _, meta = read_lightfield_with_metadata(written)
+    np.testing.assert_allclose(meta["control_points"], cp)
+    assert meta["n_times"] == 12 and meta["infinity_disparity"] == -0.5
+
+
+def test_a_path_file_that_holds_no_path_is_ignored_with_a_warning(tmp_path, lf_gray):
+    np.save(tmp_path / "a.npy", lf_gray)
+    (tmp_path / "a.path.json").write_text('{"control_points": [[1, 2]]}')
+    with pytest.warns(UserWarning, match=r"a.path.json was not read as the light field's camera path: .*\(1, 2\)"):
+        lf, meta = read_lightfield_with_metadata(tmp_path / "a.npy")
+    np.testing.assert_array_equal(lf, lf_gray)
+    assert "control_points" not in meta
+    (tmp_path / "a.path.json").write_text("not json")
+    with pytest.warns(UserWarning, match="not read"):
+        read_lightfield_with_metadata(tmp_path / "a.npy")
+
+
 def test_writer_never_overwrites_unless_asked(tmp_path, lf_gray):
     p = write_lightfield(tmp_path / "a.npz", lf_gray)
     with pytest.raises(FileExistsError, match="overwrite"):

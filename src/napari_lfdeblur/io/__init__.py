@@ -41,7 +41,7 @@ from ._common import (
     check_value_range,
     parse_value_range,
 )
-from ._write import PATH_FIELDS, write_lightfield
+from ._write import PATH_FIELDS, path_json_beside, write_lightfield
 
 __all__ = [
     "read_lightfield",
@@ -268,13 +268,44 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
     }
     if value_range is not None:
         metadata["value_range"] = value_range if value_range == "auto" else list(value_range)
-    # what a file written by this package states about the blur (T, d_inf) is read back as such
+    # what a file written by this package states about the blur (path, T, d_inf) is read back as such
     saved = metadata.get("saved_metadata")
-    for key in PATH_FIELDS:
+    for key in ("control_points", *PATH_FIELDS):
         if isinstance(saved, dict) and key in saved and key not in metadata:
             metadata[key] = saved[key]
+    if "control_points" not in metadata:
+        _read_path_beside(path, metadata)
     _check_view_order(lf, path, metadata)
     return lf, metadata
+
+
+def _read_path_beside(path: Path, metadata: dict) -> None:
+    """Add to ``metadata`` the camera path that :func:`write_lightfield` put beside ``path``, if any.
+
+    That is ``<name>.path.json`` (``path.json`` in a folder), for the formats
+    that hold no path themselves. Its ``control_points`` (and the
+    ``n_times`` and ``infinity_disparity`` it states) go to the top level,
+    its name to ``path_file``. A file there that holds no valid path is
+    ignored with a warning: the light field is read all the same.
+    """
+    import json
+
+    from ..path import validate_control_points
+
+    beside = path_json_beside(path)
+    if not beside.is_file():
+        return
+    try:
+        doc = json.loads(beside.read_text())
+        cp = validate_control_points(doc.get("control_points") if isinstance(doc, dict) else doc)
+    except (OSError, ValueError, TypeError) as exc:
+        warnings.warn(f"{beside} was not read as the light field's camera path: {exc}", stacklevel=3)
+        return
+    metadata["control_points"] = cp.tolist()
+    metadata["path_file"] = str(beside.resolve())
+    for key in PATH_FIELDS:
+        if isinstance(doc, dict) and key in doc and key not in metadata:
+            metadata[key] = doc[key]
 
 
 class ViewOrderWarning(UserWarning):

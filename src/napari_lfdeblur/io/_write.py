@@ -69,6 +69,14 @@ def sidecar_path_json(path, layout: str | None = None) -> Path:
     path = Path(path)
     if _layout_of(path, layout) == "views":
         return path / "path.json"
+    return path_json_beside(path)
+
+
+def path_json_beside(path) -> Path:
+    """``<name>.path.json`` beside the file ``path`` (its last suffix replaced), ``path.json`` in a folder."""
+    path = Path(path)
+    if path.is_dir():
+        return path / "path.json"
     return path.with_name(path.name[: -len(path.suffix)] + ".path.json" if path.suffix else path.name + ".path.json")
 
 
