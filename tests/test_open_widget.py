@@ -65,6 +65,20 @@ def test_opening_again_adds_a_layer_and_replaces_nothing(make_napari_viewer, qtb
     assert viewer.layers[1].name != first.name
 
 
+def test_a_file_with_its_path_opens_the_path_too(make_napari_viewer, qtbot, tmp_path, lf, notifications):
+    cp = [[-1.0, 0.0, 0.0], [1.0, 0.5, 0.1]]
+    path = tmp_path / "blurred.npy"  # the path in blurred.path.json beside it
+    write_lightfield(path, lf, control_points=cp)
+    viewer, w = _widget(make_napari_viewer)
+    viewer.add_image(np.zeros((2, 2)), name="blurred")  # the new layer's name is made unique
+    w.source.value = path
+    layer = w.open_and_wait()
+    assert layer.name == "blurred [1]" and layer.metadata["control_points"] == cp
+    drawn = viewer.layers["blurred [1] path"]
+    assert drawn.metadata["control_points"] == cp and drawn.metadata["source_layer"] == "blurred [1]"
+    assert [x.name for x in viewer.layers] == ["blurred", "blurred [1]", "blurred [1] path"]
+
+
 def test_folder_of_views_with_a_chosen_layout(make_napari_viewer, qtbot, tmp_path, lf, notifications):
     folder = tmp_path / "views"
     write_lightfield(folder, lf, layout="views")

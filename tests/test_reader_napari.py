@@ -66,6 +66,37 @@ def test_reader_layer_tuple(tmp_path, lf_rgb):
     np.testing.assert_array_equal(data, lf_rgb[..., 0])
 
 
+def test_reader_opens_the_camera_path_a_file_holds(tmp_path, lf_rgb):
+    from napari_lfdeblur._napari.layers import path_scale
+    from napari_lfdeblur._napari.reader import read_lightfield_layer
+    from napari_lfdeblur.path import bezier_positions, load_path_json
+
+    cp = np.array([[-1.0, 0.5, 0.2], [0.0, -0.5, 0.0], [1.0, 0.0, -0.2]])
+    write_lightfield(tmp_path / "out.npz", lf_rgb, control_points=cp, metadata={"n_times": 9})
+    (data, kw, kind), (shapes, path_kw, path_kind) = read_lightfield_layer(tmp_path / "out.npz")
+    assert kind == "image" and path_kind == "shapes" and path_kw["name"] == "out path"
+    np.testing.assert_allclose(path_kw["metadata"]["control_points"], load_path_json(tmp_path / "out.path.json"))
+    assert path_kw["metadata"]["n_times"] == 9 and path_kw["metadata"]["source_layer"] == "out"
+    # the polyline is the path at the file's 9 instants, in the frame of the centre view
+    V, U, Y, X = lf_rgb.shape[:4]
+    (line,) = [s for s, k in zip(shapes, path_kw["features"]["kind"]) if k == "path"]
+    pos = bezier_positions(cp, 9)
+    expected = np.stack([(Y - 1) / 2 + path_scale((V, U, Y, X)) * pos[:, 1],
+                         (X - 1) / 2 + path_scale((V, U, Y, X)) * pos[:, 0]], axis=1)
+    np.testing.assert_allclose(line, expected, atol=1e-9)
+
+
+def test_reader_opens_the_light_field_when_its_path_is_unusable(tmp_path, lf_rgb):
+    from napari_lfdeblur._napari.reader import read_lightfield_layer
+
+    write_lightfield(tmp_path / "plain.npz", lf_rgb)
+    assert [k for *_, k in read_lightfield_layer(tmp_path / "plain.npz")] == ["image"]
+    np.savez(tmp_path / "odd.npz", lf=lf_rgb, control_points=np.zeros((3, 4)))  # 4 columns: no path
+    ((data, kw, kind),) = read_lightfield_layer(tmp_path / "odd.npz")
+    np.testing.assert_array_equal(data, lf_rgb)
+    assert kw["metadata"]["control_points"] == np.zeros((3, 4)).tolist()
+
+
 def test_writer_functions(tmp_path, lf_rgb):
     from napari_lfdeblur._napari.writer import write_h5, write_npz, write_tiff
 
@@ -98,6 +129,16 @@ def test_viewer_open_folder(make_napari_viewer, tmp_path, lf_rgb):
     np.testing.assert_allclose(layer.data, lf_rgb, atol=0.5 / 65535 + 1e-7)
     # the two view axes are the sliders
     assert viewer.dims.ndim == 4 and tuple(viewer.dims.axis_labels) == ("v", "u", "y", "x")
+
+
+def test_viewer_open_draws_the_path_the_file_holds(make_napari_viewer, tmp_path, lf_rgb):
+    cp = [[-1.0, 0.0, 0.0], [1.0, 0.5, 0.0]]
+    write_lightfield(tmp_path / "blurred.tif", lf_rgb, control_points=cp)
+    viewer = make_napari_viewer()
+    viewer.open(str(tmp_path / "blurred.tif"), plugin="napari-lfdeblur")
+    assert [layer.name for layer in viewer.layers] == ["blurred", "blurred path"]
+    assert viewer.layers["blurred path"].metadata["control_points"] == cp
+    assert viewer.layers["blurred"].metadata["control_points"] == cp  # where the widgets take it from
 
 
 def test_viewer_open_real_lytro(make_napari_viewer):

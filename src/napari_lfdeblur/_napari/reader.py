@@ -1,4 +1,9 @@
-"""napari reader contribution: open a light field as one 4D/5D Image layer.
+"""napari reader contribution: open a light field as a 4D/5D Image layer.
+
+A file that holds the camera path it was blurred or restored with (as
+``simulate_blur``'s, ``deconvolve``'s and ``blind_deblur``'s outputs written
+by ``write_lightfield`` or the ``lfdeblur`` commands do) also opens that path,
+as the widgets draw it: a Shapes layer ``'<name> path'`` over the centre view.
 
 ``napari_get_reader(path)`` claims only paths that hold a light field (a
 folder of views, an ``.eslf.png``, a Light Field Toolbox ``.mat``, or a
@@ -12,7 +17,7 @@ import os
 from pathlib import Path
 
 from ..io import probe_layout, read_lightfield_with_metadata
-from .layers import lightfield_layer_data
+from .layers import lightfield_layer_data, path_layer_data
 
 __all__ = ["napari_get_reader", "read_lightfield_layer"]
 
@@ -61,11 +66,16 @@ def read_lightfield_layer(path, **options):
 
     Returns
     -------
-    list of one tuple ``(data, kwargs, 'image')``
-        ``data`` is ``(V, U, Y, X[, C])`` float32 in [0, 1]; ``kwargs`` has
-        ``axis_labels=('v', 'u', 'y', 'x')``, ``rgb`` (True for colour),
-        ``name`` and ``metadata`` (``source``, ``layout``, ``camera`` when
-        known, ...).
+    list of layer data tuples
+        First ``(data, kwargs, 'image')``: ``data`` is ``(V, U, Y, X[, C])``
+        float32 in [0, 1]; ``kwargs`` has ``axis_labels=('v', 'u', 'y', 'x')``,
+        ``rgb`` (True for colour), ``name`` and ``metadata`` (``source``,
+        ``layout``, ``camera`` when known, ``control_points`` when the file
+        holds a camera path, ...). Then, when the file holds a valid camera
+        path, ``(shapes, kwargs, 'shapes')`` drawing it
+        (:func:`~napari_lfdeblur._napari.layers.path_layer_data`, sampled at
+        the file's ``n_times``, else 32). A path the file states badly
+        draws nothing; the light field opens all the same.
     """
     p = Path(_single_path(path))
     lf, meta = read_lightfield_with_metadata(p, **options)
@@ -75,4 +85,13 @@ def read_lightfield_layer(path, **options):
         if name.lower().endswith(suffix) and len(name) > len(suffix):
             name = name[: -len(suffix)]
             break
-    return [lightfield_layer_data(lf, name=name or str(p), metadata=meta)]
+    name = name or str(p)
+    layers = [lightfield_layer_data(lf, name=name, metadata=meta)]
+    if meta.get("control_points") is not None:
+        try:
+            n_times = int(meta.get("n_times") or 32)
+            layers.append(path_layer_data(meta["control_points"], lf.shape, n_times=n_times, name=f"{name} path",
+                                          metadata={"source_layer": name}))
+        except (TypeError, ValueError):
+            pass  # not a path this package can draw: the light field alone, its metadata as the file said
+    return layers

@@ -44,8 +44,9 @@ class OpenLightFieldWidget(Container):
     ``layout`` (``'auto'`` or one of :data:`napari_lfdeblur.io.LAYOUTS`),
     ``value_range`` (empty, ``auto`` or ``LO,HI``), *Open* and a status
     line. The new layer is added beside any layer of the same name (napari
-    makes the name unique); nothing is replaced. From a script,
-    :meth:`open_and_wait` returns the new layer.
+    makes the name unique); nothing is replaced. A file that holds its
+    camera path also gets a path layer, ``'<layer name> path'``. From a
+    script, :meth:`open_and_wait` returns the new light-field layer.
     """
 
     def __init__(self, napari_viewer):
@@ -159,7 +160,11 @@ class OpenLightFieldWidget(Container):
             self.status.value = "not opened"
             notify_error(f"Open a light field: {result}")
             return
-        layer = self.last_layer = add_layer(self.viewer, result, replace=False)
+        layer = self.last_layer = add_layer(self.viewer, result[0], replace=False)
+        for data, kwargs, kind in result[1:]:  # the camera path the file holds, named after the layer it drew
+            meta = {**kwargs["metadata"], "source_layer": layer.name}
+            add_layer(self.viewer, (data, {**kwargs, "name": f"{layer.name} path", "metadata": meta}, kind),
+                      replace=False)
         shape = " x ".join(str(n) for n in layer.data.shape)
         self.status.value = f"opened {path.name}: {shape}"
         notify_info(f"opened {path.name} as {layer.name!r} ({shape})")
@@ -172,6 +177,6 @@ class OpenLightFieldWidget(Container):
 def _read(path: Path, options: dict):
     """Read in the worker; an error is returned, not raised (it becomes a notification)."""
     try:
-        return path, read_lightfield_layer(path, **options)[0]
+        return path, read_lightfield_layer(path, **options)
     except Exception as exc:  # noqa: BLE001 - reported to the user in one line
         return path, exc
