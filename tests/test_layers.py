@@ -126,5 +126,7 @@ def test_6_column_path_layer_draws_the_translation_and_keeps_the_rotation(tmp_pa
     np.testing.assert_array_equal(control_points_from_layer(lf), cp)
     written = write_npz(str(tmp_path / "b"), lf.data, {"name": "b", "metadata": meta})
     np.testing.assert_allclose(load_path_json(written[1]), cp)
-    (_, kw_read, _), = read_lightfield_layer(written[0])
+    (_, kw_read, _), (_, path_kw, _) = read_lightfield_layer(written[0])  # the light field, and its path drawn
     np.testing.assert_allclose(kw_read["metadata"]["control_points"], cp)
+    np.testing.assert_allclose(path_kw["metadata"]["control_points"], cp)
+    assert path_kw["metadata"]["motion"] == "6dof" and path_kw["metadata"]["n_times"] == 9
