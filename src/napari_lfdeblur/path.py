@@ -146,10 +146,9 @@ def random_path(
         If ``n_points`` is not an integer >= 2, or ``extent`` or
         ``z_extent`` is negative or not a finite number.
     """
-    if isinstance(n_points, bool) or int(n_points) != n_points or n_points < 2:
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
         raise ValueError(f"a Bezier path needs an integer number >= 2 of control points; got {n_points!r}")
     extent, z_extent = _number("extent", extent, 0.0), _number("z_extent", z_extent, 0.0)
-    n_points = int(n_points)
     rng = np.random.default_rng(seed)
     cp = rng.uniform(-0.5, 0.5, size=(n_points, 3)) * np.array([extent, extent, z_extent])
     return center_path(cp)
