@@ -764,3 +764,25 @@ def test_cli_deconvolve(tmp_path, capsys):
     assert "weight" in capsys.readouterr().err
     assert main(["deconvolve", str(tmp_path / "missing.npz"), str(path_file), str(out), "--overwrite"]) == 2
     assert main(["deconvolve", str(src), str(tmp_path / "nopath.json"), str(out), "--overwrite"]) == 2
+
+
+def test_cli_deconvolve_takes_the_path_the_input_holds(tmp_path, capsys):
+    from napari_lfdeblur.cli import main
+    from napari_lfdeblur.io import read_lightfield, write_lightfield
+
+    lf = np.random.default_rng(9).random((5, 5, 10, 10)).astype(np.float32)
+    cp = linear_path(1.5, angle_deg=30)
+    blurred = simulate_blur(lf, cp, n_times=8, infinity_disparity=0.5)
+    # an .npy holds no metadata: its path, T and d_inf are in blurred.path.json beside it
+    src = write_lightfield(tmp_path / "blurred.npy", blurred, control_points=cp,
+                           metadata={"n_times": 8, "infinity_disparity": 0.5})
+    assert main(["deconvolve", str(src), str(tmp_path / "out.npz"), "--iterations", "5", "--device", "cpu"]) == 0
+    expected = deconvolve(blurred, cp, n_times=8, infinity_disparity=0.5, n_iter=5, device="cpu")
+    np.testing.assert_allclose(read_lightfield(tmp_path / "out.npz"), expected, atol=1e-6)
+    # a light field that holds no path: one line that says what to give
+    np.save(tmp_path / "bare.npy", blurred)
+    capsys.readouterr()
+    assert main(["deconvolve", str(tmp_path / "bare.npy"), str(tmp_path / "o.npz")]) == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]  # (random views may also draw a view-order warning)
+    assert "error" in last and "holds no camera path" in last and "PATH.json" in last
+    assert not (tmp_path / "o.npz").exists()

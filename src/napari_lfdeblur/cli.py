@@ -15,7 +15,8 @@ import sys
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
-from ._cli_info import DEFAULT_N_TIMES, describe, describe_lightfield, describes, result_metadata, rotation_note
+from ._cli_info import (DEFAULT_N_TIMES, describe, describe_lightfield, describes, read_path_file, result_metadata,
+                        rotation_note)
 from ._cli_types import angular_crop, fraction, gib, value_range
 
 __all__ = ["main"]
@@ -365,7 +366,10 @@ def _run_info(args):
 def _add_deconvolve(sub):
     p = sub.add_parser("deconvolve", help="undo the blur of a known camera path (non-blind)")
     _input_argument(p, "blurred light field file or folder")
-    p.add_argument("path_json", help="JSON file of the path's control points (as written by simulate)")
+    p.add_argument("path_json", nargs="?",
+                   help="JSON file of the path's control points (as written by simulate); default: the path the "
+                        "input holds (stored in it, or in the NAME.path.json beside it, as every lfdeblur "
+                        "command writes its outputs)")
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
     p.add_argument("--method", default="tv", choices=["tv", "inplane", "auto"],
                    help="tv (default: 4D total variation, any path and d_inf), inplane (the exact angular "
@@ -383,35 +387,31 @@ def _add_deconvolve(sub):
     p.add_argument("--tol", type=float, default=1e-4,
                    help="TV stops when the objective falls by less than this fraction in an iteration (default 1e-4)")
     p.add_argument("--n-times", type=int, default=None,
-                   help="exposure instants T (default: the path file's n_times, else 32)")
+                   help="exposure instants T (default: those stated with the path, else 32)")
     p.add_argument("--infinity-disparity", type=float, default=None,
-                   help="d_inf in px/view (default: the path file's infinity_disparity, else the input file's, "
-                        "else 0)")
+                   help="d_inf in px/view (default: the one stated with the path, else the input file's, else 0)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
 
 
 def _run_deconvolve(args):
-    import json
-
     from .deconvolution import iter_deconvolve
     from .io._write import sidecar_path_json, write_lightfield
-    from .path import load_path_json
+    from .path import validate_control_points
     from .progress import run_to_completion
 
     out = Path(args.output)
     _check_targets([out, sidecar_path_json(out)], args.overwrite)  # the result, and the path it was restored with
-    cp = load_path_json(args.path_json)
-    try:
-        doc = json.loads(Path(args.path_json).read_text())
-    except (OSError, ValueError):
-        doc = {}
-    doc = doc if isinstance(doc, dict) else {}
-    n_times = args.n_times if args.n_times is not None else int(doc.get("n_times", DEFAULT_N_TIMES))
-    given = args.infinity_disparity
-    if given is None and doc.get("infinity_disparity") is not None:
-        given = float(doc["infinity_disparity"])
+    known = None if args.path_json is None else read_path_file(args.path_json)  # before the read: fails fast
     blurred, meta = _read(args)
+    if known is None and meta.get("control_points") is None:
+        raise CLIError(f"{args.input} holds no camera path (in itself or in a NAME.path.json beside it): "
+                       "give its path file, lfdeblur deconvolve INPUT PATH.json OUTPUT")
+    cp, stated = known or (validate_control_points(meta["control_points"]), meta)
+    n_times = args.n_times if args.n_times is not None else int(stated.get("n_times") or DEFAULT_N_TIMES)
+    given = args.infinity_disparity
+    if given is None and stated.get("infinity_disparity") is not None:
+        given = float(stated["infinity_disparity"])
     d_inf = _stated_infinity_disparity(given, meta, args.input)
     options = dict(method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
                    couple_channels=not args.separate_channels, saturation=not args.no_saturation)
