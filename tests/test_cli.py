@@ -79,6 +79,9 @@ def test_demo_quick(tmp_path):
         # deconvolution with the known path beats the blurred input
         assert rec["psnr_db"]["deconvolved (path known)"] > rec["psnr_db"]["blurred"] + 1.0
     np.testing.assert_allclose(load_path_json(out / "synthetic_blurred.path.json"), summary["true_control_points"])
+    # every light field it writes has the path beside it, and the summary lists exactly what is there
+    np.testing.assert_allclose(load_path_json(out / "lytro_deconvolved.path.json"), summary["true_control_points"])
+    assert sorted(summary["files"]) == sorted(p.name for p in out.iterdir())
 
 
 def test_demo_quick_blind_says_what_it_found(tmp_path, capsys):

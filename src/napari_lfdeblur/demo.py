@@ -124,17 +124,21 @@ def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> l
     from .io import write_lightfield
     from .metrics import psnr, ssim
 
+    files = []
+
+    def save(kind, lf, cp):  # the light field and, beside it, the path it was blurred or restored with
+        write_lightfield(out / f"{name}_{kind}.npz", lf, overwrite=True, control_points=cp)
+        files.extend([f"{name}_{kind}.npz", f"{name}_{kind}.path.json"])
+
     with timer("blur"):
         blurred = simulate_blur(sharp, DEMO_PATH, n_times=RENDER_N_TIMES, device=device)
         blurred = np.clip(blurred + rng.normal(0, NOISE_SIGMA, blurred.shape), 0, 1).astype(np.float32)
-        write_lightfield(out / f"{name}_blurred.npz", blurred, overwrite=True, control_points=DEMO_PATH)
-    files = [f"{name}_blurred.npz"]
+        save("blurred", blurred, DEMO_PATH)
     results = {"blurred": blurred}
     with timer("deconvolve"):
         restored = deconvolve(blurred, DEMO_PATH, device=device, **({"n_iter": 30} if quick else {}))
-        write_lightfield(out / f"{name}_deconvolved.npz", restored, overwrite=True)
+        save("deconvolved", restored, DEMO_PATH)
     results["deconvolved (path known)"] = restored
-    files.append(f"{name}_deconvolved.npz")
     paths, notes = {"true": DEMO_PATH}, {}
     if blind:
         from .blind import blind_deblur
@@ -143,9 +147,8 @@ def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> l
         with timer("blind"):
             res = blind_deblur(blurred, params=_blind_params(quick), device=device, seed=0)
             est_cp = res.control_points
-            write_lightfield(out / f"{name}_blind.npz", res.lightfield, overwrite=True, control_points=est_cp)
+            save("blind", res.lightfield, est_cp)
         results["blind"] = res.lightfield
-        files.append(f"{name}_blind.npz")
         rec["blind_control_points"] = np.asarray(est_cp).tolist()
         rec["blind_path_error"] = path_error(est_cp, DEMO_PATH, lightfield=sharp).as_dict()
         rec["blind_blur_found"] = bool(res.info["blur_found"])
