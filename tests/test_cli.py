@@ -403,3 +403,29 @@ def test_a_closed_stdout_ends_the_command_quietly(lf_file):
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 141
     assert err == ""
+
+
+def test_no_command_prints_the_commands(capsys):
+    assert main([]) == 2
+    out = capsys.readouterr().out
+    assert out.startswith("usage: lfdeblur") and all(c in out for c in ("info", "simulate", "deconvolve", "deblur"))
+
+
+def test_python_dash_m_runs_the_command(tmp_path):
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-m", "napari_lfdeblur", "--version"], capture_output=True, text=True,
+                         cwd=tmp_path, check=True)
+    assert run.stdout.strip() == f"lfdeblur {napari_lfdeblur.__version__}"
+
+
+def test_a_reader_warning_is_one_line(lf_file, tmp_path, capsys):
+    _, src = lf_file
+    (tmp_path / "lf.path.json").write_text('{"control_points": [[1, 2]]}')  # beside lf.npy, not a path
+    assert main(["info", str(src)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert [line for line in err if "path.json" in line] == [
+        f"lfdeblur info: warning: {tmp_path / 'lf.path.json'} was not read as the light field's camera path: "
+        "control points must be an (n, 3) array of (p_x, p_y, p_z) or an (n, 6) array of (p_x, p_y, p_z, r_x, "
+        "r_y, r_z); got shape (1, 2)"]

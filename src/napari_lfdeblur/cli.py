@@ -65,7 +65,7 @@ def _read(args, **options):
     """Read ``args.input`` (a light field and its metadata), swapping the view axes on ``--swap-views``.
 
     A :class:`~napari_lfdeblur.io.ViewOrderWarning` from the reader becomes one line on stderr that
-    names the option to use.
+    names the option to use; any other warning of the reader, one line on stderr too.
     """
     import warnings
 
@@ -86,8 +86,8 @@ def _read(args, **options):
     for w in caught:
         if issubclass(w.category, ViewOrderWarning):
             transposed = w.message
-        else:
-            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+        else:  # one line, as the command's own messages
+            print(f"lfdeblur {args.command}: warning: {w.message}", file=sys.stderr)
     if args.swap_views:
         lf = np.ascontiguousarray(lf.swapaxes(0, 1))
         if "view_shifts" in meta:
@@ -466,6 +466,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Entry point of the ``lfdeblur`` command; returns the exit status."""
     parser = build_parser()
+    if not (sys.argv[1:] if argv is None else argv):  # no command: say which there are
+        parser.print_help()
+        return 2
     args = parser.parse_args(argv)
     run = getattr(sys.modules[__name__], f"_run_{args.command}")
     try:
