@@ -143,3 +143,24 @@ def test_value_range_rescales_and_a_bad_one_is_a_notification(make_napari_viewer
     layer = w.open_and_wait()
     np.testing.assert_allclose(layer.data, lf, atol=1e-6)
     assert layer.metadata["value_range"] == [0.0, 4095.0]
+
+
+def test_closing_the_viewer_during_a_read_adds_nothing(make_napari_viewer, qtbot, tmp_path, lf, notifications,
+                                                       monkeypatch):
+    import time
+
+    from napari_lfdeblur._napari.widgets import open as open_widget
+
+    real_read = open_widget._read
+    monkeypatch.setattr(open_widget, "_read", lambda path, options: (time.sleep(0.5), real_read(path, options))[1])
+    write_lightfield(tmp_path / "scene.npz", lf)
+    viewer, w = _widget(make_napari_viewer)
+    w.source.value = tmp_path / "scene.npz"
+    worker = w.open()
+    finished = []
+    worker.finished.connect(lambda: finished.append(True))
+    viewer.close()  # while the read sleeps
+    qtbot.waitUntil(lambda: bool(finished), timeout=TIMEOUT)
+    qtbot.wait(100)
+    assert w.worker is None and w.last_layer is None
+    assert not [n for n in notifications if n[0] == "error"], notifications

@@ -441,6 +441,28 @@ def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, not
     assert not [n for n in notifications if n[0] == "error"], notifications
 
 
+def test_closing_the_viewer_during_a_run_stops_it_quietly(make_napari_viewer, qtbot, lf, notifications):
+    """The run's late signals must not reach the deleted widgets (that raised in a Qt slot, then aborted)."""
+    pytest.importorskip("napari_lfdeblur.blind")
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+
+    viewer = make_napari_viewer()
+    layer, _ = _blind_layer(viewer, lf)
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    w.form.n_iter.value = 100000
+    w.form.device.value = "cpu"
+    worker = w.run()
+    qtbot.waitUntil(lambda: "b path (preview)" in viewer.layers, timeout=TIMEOUT)
+    finished = []
+    worker.finished.connect(lambda: finished.append(True))
+    viewer.close()
+    qtbot.waitUntil(lambda: bool(finished), timeout=10_000)  # the solver stopped at its next cancellation point
+    qtbot.wait(200)
+    assert not w.is_running and w.last_result is None
+    assert not [n for n in notifications if n[0] == "error"], notifications
+
+
 def test_cancel_stops_inside_a_tv_iteration(make_napari_viewer, qtbot, lf, notifications, monkeypatch):
     import time
 

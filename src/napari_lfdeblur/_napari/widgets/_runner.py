@@ -149,6 +149,7 @@ class SolverWidget(Container):
     def __init__(self, napari_viewer):
         self.viewer = napari_viewer
         self.worker = None
+        self._gone = False  # the widget's Qt side was deleted (the viewer closed): signals update nothing
         self._cancelled = False
         self._cancel_event = threading.Event()
         self._cancel_reported = False
@@ -274,7 +275,8 @@ class SolverWidget(Container):
         self.progress.status.value = f"{self.title}: cancelling..."
 
     def _quit_worker(self, *_):
-        """Stop a running worker when the widget goes away."""
+        """Stop a running worker when the widget goes away; its late signals then touch no deleted widget."""
+        self._gone = True
         if self.worker is not None:
             self._cancelled = True
             self._cancel_event.set()
@@ -285,7 +287,7 @@ class SolverWidget(Container):
 
     # --------------------------------------------------------- signals
     def _on_yielded(self, progress):
-        if self._cancelled:
+        if self._cancelled or self._gone:
             return
         try:
             self.progress.update_progress(progress)
@@ -295,7 +297,7 @@ class SolverWidget(Container):
             notify_warning(f"{self.title}: progress display failed: {exc}")
 
     def _on_returned(self, result):
-        if self._cancelled:
+        if self._cancelled or self._gone:
             return
         if isinstance(result, _Failure):
             self.cleanup()
@@ -316,11 +318,16 @@ class SolverWidget(Container):
 
     def _on_aborted(self):
         self._cancel_reported = True
+        if self._gone:
+            return
         self.cleanup()
         self.progress.finish(f"{self.title}: cancelled, nothing added", done=False)
         notify_info(f"{self.title}: cancelled")
 
     def _on_finished(self):
+        if self._gone:
+            self.worker = None
+            return
         if self._cancelled:
             # stopped at a cancellation point, the worker returns without an 'aborted' signal
             if self._cancel_reported:

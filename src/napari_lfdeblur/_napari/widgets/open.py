@@ -68,6 +68,8 @@ class OpenLightFieldWidget(Container):
                                   self.views_u, self.layout_combo, self.value_range, self.open_button, self.status])
         self.folder_box.changed.connect(self._folder_toggled)
         self.source.changed.connect(self._source_changed)
+        self._gone = False  # the Qt side was deleted (the viewer closed during a read): the read's end adds nothing
+        self.native.destroyed.connect(self._forget)
         self.open_button.changed.connect(self.open)
         self.native.layout().addStretch(1)
 
@@ -154,7 +156,12 @@ class OpenLightFieldWidget(Container):
             time.sleep(0.005)
         return self.last_layer
 
+    def _forget(self, *_):
+        self._gone = True
+
     def _on_returned(self, outcome):
+        if self._gone:
+            return
         path, result = outcome
         if isinstance(result, Exception):
             self.status.value = "not opened"
@@ -171,7 +178,8 @@ class OpenLightFieldWidget(Container):
 
     def _on_finished(self, *_):
         self.worker = None
-        self.open_button.enabled = True
+        if not self._gone:
+            self.open_button.enabled = True
 
 
 def _read(path: Path, options: dict):
