@@ -584,6 +584,15 @@ def test_bad_input_gives_clear_errors():
         BlindParams().replace(rotation={"warm_hqs_steps": -1})
 
 
+def test_a_light_field_on_another_scale_is_refused_not_returned_unchanged():
+    """The salient-edge weight is on the [0, 1] scale: 8-bit values as floats would show it no edges."""
+    lf = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
+    with pytest.raises(ValueError, match=r"reaches 255: blind deblurring takes values in \[0, 1\].*255 for 8-bit"):
+        iter_blind_deblur(np.where(lf > 0.5, 255.0, lf * 255).astype(np.float32))  # refused before any work
+    lf[0, 0, 0, 0] = 1.2  # an overshoot of noise or a highlight is still on the [0, 1] scale
+    iter_blind_deblur(lf).close()
+
+
 @pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf"), 4.5, -4.01])
 def test_infinity_disparity_must_be_finite_and_within_the_views(bad):
     good = np.zeros((5, 5, 16, 16), np.float32)  # bound: |d_inf| * 2 <= 16 / 2

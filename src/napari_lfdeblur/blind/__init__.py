@@ -96,7 +96,7 @@ import numpy as np
 import torch
 
 from .. import devices
-from .._lightfield import brightest, check_number
+from .._lightfield import BRIGHT_LIMIT, brightest, check_number
 from .._memory import release_host_memory
 from ..blur import validate_lightfield
 from ..path import bezier_positions, canonical_time_direction, center_path, path_in_frame
@@ -188,8 +188,9 @@ def blind_deblur(
     Raises
     ------
     ValueError
-        On a malformed light field (wrong ndim, NaN), invalid parameter values
-        or an ``infinity_disparity`` that is not finite, beyond the views or
+        On a malformed light field (wrong ndim, NaN, values reaching 2: not
+        on the [0, 1] scale), invalid parameter values or an
+        ``infinity_disparity`` that is not finite, beyond the views or
         ``'auto'``.
     TypeError
         On an unknown keyword or parameter of the wrong type.
@@ -274,6 +275,9 @@ def _validate_input(blurred, infinity_disparity):
         raise ValueError(f"blind deblurring needs at least 2 x 2 views; got {V} x {U}")
     if Y < 4 or X < 4:
         raise ValueError(f"blind deblurring needs views of at least 4 x 4 pixels; got {Y} x {X}")
+    if (top := float(arr.max())) > BRIGHT_LIMIT:
+        raise ValueError(f"the blurred light field reaches {top:.4g}: blind deblurring takes values in [0, 1] (its "
+                         "edge weights are on that scale); divide it by its white level (255 for 8-bit values)")
     d_inf = check_infinity_disparity(infinity_disparity, arr.shape)
     return arr, d_inf
 
