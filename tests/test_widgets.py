@@ -418,7 +418,8 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     np.testing.assert_array_equal(layer.data, before)
 
 
-def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, notifications):
+def _long_blind_run(make_napari_viewer, qtbot, lf):
+    """A viewer and a *Blind deblur* widget whose (endless) run has shown its live path preview."""
     pytest.importorskip("napari_lfdeblur.blind")
     from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
 
@@ -428,9 +429,13 @@ def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, not
     w.layer_combo.set_layer(layer)
     w.form.n_iter.value = 100000
     w.form.device.value = "cpu"
-    w.run()
-    # wait for the live path preview (a layer)
+    worker = w.run()
     qtbot.waitUntil(lambda: "b path (preview)" in viewer.layers, timeout=TIMEOUT)
+    return viewer, w, worker
+
+
+def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, notifications):
+    viewer, w, _ = _long_blind_run(make_napari_viewer, qtbot, lf)
     assert w.is_running
     w.cancel()
     qtbot.waitUntil(lambda: not w.is_running, timeout=10_000)
@@ -443,17 +448,7 @@ def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, not
 
 def test_closing_the_viewer_during_a_run_stops_it_quietly(make_napari_viewer, qtbot, lf, notifications):
     """The run's late signals must not reach the deleted widgets (that raised in a Qt slot, then aborted)."""
-    pytest.importorskip("napari_lfdeblur.blind")
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
-
-    viewer = make_napari_viewer()
-    layer, _ = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.layer_combo.set_layer(layer)
-    w.form.n_iter.value = 100000
-    w.form.device.value = "cpu"
-    worker = w.run()
-    qtbot.waitUntil(lambda: "b path (preview)" in viewer.layers, timeout=TIMEOUT)
+    viewer, w, worker = _long_blind_run(make_napari_viewer, qtbot, lf)
     finished = []
     worker.finished.connect(lambda: finished.append(True))
     viewer.close()
