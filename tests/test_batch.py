@@ -335,3 +335,21 @@ def test_shake6_items_are_6dof_and_blurred_by_their_path():
     blurred, cp = simulate_item(lf, "a", 0, path_kind="shake6", extent=1.5, seed=4, n_times=8)
     assert cp.shape[1] == 6
     np.testing.assert_array_equal(blurred, simulate_blur(lf, cp, n_times=8, device="cpu"))
+
+
+def test_a_pattern_takes_the_light_fields_it_matches_and_names_the_rest(tmp_path):
+    """'out/*' over a batch's output folder: its light fields, not its path files, manifest and README."""
+    from napari_lfdeblur.batch import expand_inputs
+
+    lf = np.zeros((2, 2, 4, 4), np.float32)
+    write_lightfield(tmp_path / "a.npz", lf, control_points=[[0, 0, 0], [1, 0, 0]])  # + a.path.json
+    write_lightfield(tmp_path / "views", lf)  # a folder of views
+    (tmp_path / "manifest.jsonl").write_text("{}\n")
+    (tmp_path / "README.md").write_text("notes")
+    with pytest.warns(UserWarning, match=r"skipped 3 match\(es\) that are not light fields: README.md, "
+                                         r"a.path.json, manifest.jsonl"):
+        assert expand_inputs(str(tmp_path / "*")) == [tmp_path / "a.npz", tmp_path / "views"]
+    with pytest.raises(ValueError, match=r"no light field matches .*\(it matches 1 other file\(s\), such as a.path"):
+        expand_inputs(str(tmp_path / "*.json"))
+    listed = [tmp_path / "README.md", tmp_path / "a.npz"]  # given one by one: all kept (README fails as an item)
+    assert expand_inputs(listed) == listed

@@ -12,6 +12,7 @@ import argparse
 import os
 import shlex
 import sys
+import warnings
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
@@ -67,8 +68,6 @@ def _read(args, **options):
     A :class:`~napari_lfdeblur.io.ViewOrderWarning` from the reader becomes one line on stderr that
     names the option to use; any other warning of the reader, one line on stderr too.
     """
-    import warnings
-
     import numpy as np
 
     from .io import ViewOrderWarning, read_lightfield_with_metadata
@@ -86,8 +85,8 @@ def _read(args, **options):
     for w in caught:
         if issubclass(w.category, ViewOrderWarning):
             transposed = w.message
-        else:  # one line, as the command's own messages
-            print(f"lfdeblur {args.command}: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)  # one line: main's
     if args.swap_views:
         lf = np.ascontiguousarray(lf.swapaxes(0, 1))
         if "view_shifts" in meta:
@@ -472,7 +471,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     run = getattr(sys.modules[__name__], f"_run_{args.command}")
     try:
-        status = run(args)
+        with warnings.catch_warnings():  # a warning is one line on stderr, as the command's own messages
+            warnings.showwarning = lambda message, *_a, **_k: print(
+                f"lfdeblur {args.command}: warning: {message}", file=sys.stderr)
+            status = run(args)
     except KeyboardInterrupt:
         print("lfdeblur: interrupted", file=sys.stderr)
         return 130

@@ -6,6 +6,7 @@ import datetime
 import glob
 import json
 import os
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -156,14 +157,28 @@ def gpu_workers(client) -> int:
 
 
 def expand_inputs(inputs) -> list[Path]:
-    """The input files or folders: a glob pattern, one path, or a sequence of paths (order kept)."""
+    """The input files or folders: a glob pattern, one path, or a sequence of paths (order kept).
+
+    A pattern keeps the matches whose kind the reader knows
+    (:func:`~napari_lfdeblur.io.detect_layout`: a light-field suffix or a
+    folder of views), so that ``'out/*'`` over a batch's output folder takes
+    its light fields, not its path files, manifest and README; the others are
+    named in a warning. Paths given one by one are all kept (an unreadable
+    one becomes a failed item).
+    """
     if isinstance(inputs, (str, os.PathLike)):
         text = str(inputs)
         if glob.has_magic(text):
             found = [Path(p) for p in sorted(glob.glob(text, recursive=True))]
-            if not found:
-                raise ValueError(f"no input matches {text!r}")
-            return found
+            kept = [p for p in found if _lightfield_kind(p)]
+            if not kept:
+                raise ValueError(f"no light field matches {text!r}" + (
+                    f" (it matches {len(found)} other file(s), such as {found[0].name})" if found else ""))
+            if len(kept) < len(found):
+                others = [p.name for p in found if p not in kept]
+                warnings.warn(f"{text!r}: skipped {len(others)} match(es) that are not light fields: "
+                              f"{', '.join(others[:5])}{', ...' if len(others) > 5 else ''}", stacklevel=2)
+            return kept
         inputs = [inputs]
     try:
         paths = [Path(p) for p in inputs]
@@ -178,6 +193,17 @@ def expand_inputs(inputs) -> list[Path]:
                              "seeds would collide: rename one")
         names[p.name] = p
     return paths
+
+
+def _lightfield_kind(path: Path) -> bool:
+    """Whether the reader knows the kind of ``path`` (by its name or, for a folder, its files' names)."""
+    from ..io import LightFieldError, detect_layout
+
+    try:
+        detect_layout(path)
+    except (LightFieldError, OSError):
+        return False
+    return True
 
 
 def _is_done(spec: dict, last: dict | None) -> bool:
