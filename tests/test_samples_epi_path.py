@@ -223,3 +223,13 @@ def test_path_json_round_trip_and_no_overwrite(tmp_path):
         load_path_json(tmp_path / "short.json")
     with pytest.raises(FileNotFoundError):
         load_path_json(tmp_path / "missing.json")
+    # with its fields: those save_path_json stored, none for a bare list
+    from napari_lfdeblur.path import read_path_json
+
+    cp2, fields = read_path_json(save_path_json(tmp_path / "q.json", cp, n_times=16, infinity_disparity=0.5))
+    np.testing.assert_array_equal(cp2, cp)
+    assert fields["n_times"] == 16 and fields["infinity_disparity"] == 0.5
+    (tmp_path / "bare.json").write_text(json.dumps(cp.tolist()))
+    cp3, fields = read_path_json(tmp_path / "bare.json")
+    np.testing.assert_array_equal(cp3, cp)
+    assert fields == {}

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield", "describe_path", "read_path_file",
+__all__ = ["DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield", "describe_path",
            "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note"]
 
 #: Instants a path is sampled at when its file does not state ``n_times`` (``info`` and ``deconvolve``)
@@ -88,18 +88,6 @@ def describe_lightfield(lf: np.ndarray, meta: dict, stretched: bool = False) -> 
     return lines
 
 
-def read_path_file(path) -> tuple[np.ndarray, dict]:
-    """The control points in the JSON file ``path`` and the file's fields (an empty dict for a bare list).
-
-    Raises as :func:`~napari_lfdeblur.path.load_path_json` does.
-    """
-    from .path import load_path_json
-
-    cp = load_path_json(path)
-    doc = json.loads(Path(path).read_text())
-    return cp, doc if isinstance(doc, dict) else {}
-
-
 def describe_path_file(path) -> list[str]:
     """Lines that describe the camera path in the JSON file ``path`` (as ``save_path_json`` writes it):
     :func:`describe_path`, then the file's other fields.
@@ -107,10 +95,12 @@ def describe_path_file(path) -> list[str]:
     Raises
     ------
     FileNotFoundError, ValueError
-        As :func:`~napari_lfdeblur.path.load_path_json` (a missing file, bad
+        As :func:`~napari_lfdeblur.path.read_path_json` (a missing file, bad
         JSON, no or malformed control points).
     """
-    cp, doc = read_path_file(path)
+    from .path import read_path_json
+
+    cp, doc = read_path_json(path)
     extra = {k: v for k, v in doc.items() if k not in ("control_points", "units")}
     lines = [f"file:        {path}", *describe_path(cp, extra.get("n_times"))]
     lines.append("fields:" + ("" if extra else "      (none)"))

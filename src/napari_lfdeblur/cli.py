@@ -16,8 +16,7 @@ import warnings
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
-from ._cli_info import (DEFAULT_N_TIMES, describe, describe_lightfield, describes, read_path_file, result_metadata,
-                        rotation_note)
+from ._cli_info import DEFAULT_N_TIMES, describe, describe_lightfield, describes, result_metadata, rotation_note
 from ._cli_types import angular_crop, fraction, gib, value_range
 
 __all__ = ["main"]
@@ -396,12 +395,12 @@ def _add_deconvolve(sub):
 def _run_deconvolve(args):
     from .deconvolution import iter_deconvolve
     from .io._write import sidecar_path_json, write_lightfield
-    from .path import validate_control_points
+    from .path import read_path_json, validate_control_points
     from .progress import run_to_completion
 
     out = Path(args.output)
     _check_targets([out, sidecar_path_json(out)], args.overwrite)  # the result, and the path it was restored with
-    known = None if args.path_json is None else read_path_file(args.path_json)  # before the read: fails fast
+    known = None if args.path_json is None else read_path_json(args.path_json)  # before the read: fails fast
     blurred, meta = _read(args)
     if known is None and meta.get("control_points") is None:
         raise CLIError(f"{args.input} holds no camera path (in itself or in a NAME.path.json beside it): "

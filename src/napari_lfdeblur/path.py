@@ -52,6 +52,7 @@ __all__ = [
     "PRESETS",
     "save_path_json",
     "load_path_json",
+    "read_path_json",
 ]
 
 
@@ -277,6 +278,27 @@ def load_path_json(path) -> np.ndarray:
 
     A bare list of ``[p_x, p_y, p_z]`` triples (or 6-DOF rows) is accepted too.
     """
+    return read_path_json(path)[0]
+
+
+def read_path_json(path) -> tuple[np.ndarray, dict]:
+    """The control points of a path file (as :func:`load_path_json`) and its fields.
+
+    Returns
+    -------
+    control_points : ndarray, float64, shape (n, 3) or (n, 6)
+    fields : dict
+        The file's JSON object (``n_times``, ``infinity_disparity``, ...,
+        ``control_points`` included); empty for a bare list.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file does not exist.
+    ValueError
+        On invalid JSON, no ``control_points`` entry or malformed control
+        points (the message names the file).
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"path file {path} does not exist")
@@ -288,7 +310,7 @@ def load_path_json(path) -> np.ndarray:
     if cp is None:
         raise ValueError(f"{path} has no 'control_points' entry")
     try:
-        return validate_control_points(cp)
+        return validate_control_points(cp), doc if isinstance(doc, dict) else {}
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
 
