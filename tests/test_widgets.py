@@ -5,6 +5,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -604,7 +606,7 @@ def test_magicgui_form_runs_the_solver(make_napari_viewer, qtbot, lf, notificati
     np.testing.assert_array_equal(viewer.layers["b"].data, blurred)
 
 
-def test_path_json_file_fills_the_table(make_napari_viewer, tmp_path):
+def test_path_json_file_fills_the_table(make_napari_viewer, tmp_path, notifications):
     from napari_lfdeblur._napari.widgets import DeconvolveWidget
     from napari_lfdeblur.path import arc_path, save_path_json
 
@@ -614,6 +616,21 @@ def test_path_json_file_fills_the_table(make_napari_viewer, tmp_path):
     w = _dock(viewer, DeconvolveWidget(viewer))
     w.path_source.json_file.value = tmp_path / "p.json"
     np.testing.assert_allclose(w.table.control_points(), cp, atol=1e-5)
+    assert (w.form.n_times.value, w.form.infinity_disparity.value) == (32, 0.0)  # the file states neither
+    # the T and d_inf a file states reach the form, as a layer's do
+    save_path_json(tmp_path / "q.json", cp[::-1], n_times=12, infinity_disparity=-0.5)
+    w.path_source.json_file.value = tmp_path / "q.json"
+    np.testing.assert_allclose(w.table.control_points(), cp[::-1], atol=1e-5)
+    assert (w.form.n_times.value, w.form.infinity_disparity.value) == (12, -0.5)
+    assert not notifications
+    # values the form cannot take are left out with a warning; the path is still taken
+    (tmp_path / "bad.json").write_text(json.dumps(
+        {"control_points": cp.tolist(), "n_times": 7.5, "infinity_disparity": 50.0}))
+    w.path_source.json_file.value = tmp_path / "bad.json"
+    np.testing.assert_allclose(w.table.control_points(), cp, atol=1e-5)
+    assert (w.form.n_times.value, w.form.infinity_disparity.value) == (12, -0.5)
+    assert [kind for kind, _ in notifications] == ["warning", "warning"]
+    assert "n_times = 7.5" in notifications[0][1] and "infinity_disparity = 50.0" in notifications[1][1]
 
 
 def test_path_table_rows_can_be_added_and_removed(make_napari_viewer):

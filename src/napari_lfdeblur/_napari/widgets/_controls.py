@@ -18,7 +18,8 @@ import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox, Table
 from napari.utils.notifications import show_error, show_info, show_warning
 
-from ...path import MAX_ROTATION, load_path_json, validate_control_points
+from ...io import PATH_FIELDS
+from ...path import MAX_ROTATION, read_path_json, validate_control_points
 from ..layers import LayerError, control_points_from_layer, layer_kind
 
 log = logging.getLogger(__name__)
@@ -280,7 +281,8 @@ class PathSource(Container):
     """Take a path from a layer holding one (*Take path*) or from a path JSON file.
 
     ``on_path(control_points, metadata)`` is called with the path found and
-    the metadata it came with (a layer's, or ``{}`` for a file).
+    the metadata it came with: a layer's, or for a file the ``n_times`` and
+    ``infinity_disparity`` it states.
     """
 
     def __init__(self, viewer, on_path, title: str = "lfdeblur"):
@@ -318,8 +320,8 @@ class PathSource(Container):
         if not name or not str(name).lower().endswith(".json"):
             return
         try:
-            cp = load_path_json(name)
+            cp, fields = read_path_json(name)
         except (OSError, ValueError) as exc:
             notify_error(f"{self._title}: {exc}")
             return
-        self._on_path(cp, {})
+        self._on_path(cp, {key: fields[key] for key in PATH_FIELDS if key in fields})

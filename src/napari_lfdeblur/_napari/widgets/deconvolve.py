@@ -24,7 +24,7 @@ from __future__ import annotations
 from magicgui.widgets import CheckBox, ComboBox
 
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata
-from ._controls import PathSource, PathTable, device_choice, fspin, has_path, heading, spin
+from ._controls import PathSource, PathTable, device_choice, fspin, has_path, heading, notify_warning, spin
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -82,13 +82,32 @@ class DeconvolveWidget(SolverWidget):
 
     # ------------------------------------------------------------ path
     def set_path(self, control_points, metadata=None) -> None:
-        """Fill the table (and ``n_times``, ``infinity_disparity`` when ``metadata`` has them)."""
+        """Fill the table (and ``n_times``, ``infinity_disparity`` when ``metadata`` has them).
+
+        A stated value the form cannot take (not a number, not whole for
+        ``n_times``, outside the field's range) is left out with a warning
+        notification; the field keeps its value.
+        """
         meta = metadata or {}
-        if "n_times" in meta:
-            self.form.n_times.value = int(meta["n_times"])
-        if "infinity_disparity" in meta:
-            self.form.infinity_disparity.value = float(meta["infinity_disparity"])
+        for key in ("n_times", "infinity_disparity"):
+            if key in meta:
+                self._set_stated(key, meta[key])
         self.table.set_control_points(control_points)
+
+    def _set_stated(self, key: str, value) -> None:
+        field = getattr(self.form, key)
+        try:
+            number = float(value)
+            usable = not isinstance(value, bool) and field.min <= number <= field.max
+            if key == "n_times":
+                usable = usable and number == int(number)
+        except (TypeError, ValueError):
+            usable = False
+        if usable:
+            field.value = int(number) if key == "n_times" else number
+        else:
+            notify_warning(f"{self.title}: the path states {key} = {value!r}, which this form cannot take "
+                           f"({field.min:g} to {field.max:g}); {key} stays {field.value:g}")
 
     def _input_changed(self, *_):
         """Take the path (and T, d_inf) of the chosen blurred layer when it holds one."""
