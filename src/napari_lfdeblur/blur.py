@@ -421,10 +421,6 @@ class BlurOperator:
             return int(self._kernel[0].shape[0])
         return self._taps().n_taps
 
-    def is_in_plane(self) -> bool:
-        """True when ``p_z = 0``, ``d_inf = 0`` and no rotation: the same 4D convolution at every pixel."""
-        return self.kind == "angular" and bool((self.control_points[:, 2] == 0).all())
-
 
 def simulate_blur(lf, control_points, *, n_times: int = 32, infinity_disparity: float = 0.0, device="auto"):
     """Blur a light field by a camera path, following the forward model of docs/model.md exactly.

@@ -204,21 +204,6 @@ def _highpass_energy(img: np.ndarray, mask: np.ndarray) -> float:
     return float(np.sqrt(np.mean(hp[mask] ** 2)))
 
 
-def _slice_transfer(p, w, d, R, V, U, wy, wx):
-    """``K^(Ω) = sum_j w_j mean_v e^{i Ω_y s_j v_c} mean_u e^{i Ω_x s_j u_c}``, ``s_j = d^2 p_j / R``."""
-    uc = np.arange(U) - (U - 1) / 2.0
-    vc = np.arange(V) - (V - 1) / 2.0
-    H = np.zeros(np.broadcast_shapes(wy.shape, wx.shape))
-    for pj, wj in zip(p, w):
-        if wj <= 0:
-            continue
-        s = d * d * pj / R
-        hx = np.cos(wx[..., None] * s * uc).mean(-1)
-        hy = np.cos(wy[..., None] * s * vc).mean(-1)
-        H = H + wj * hy * hx
-    return H
-
-
 def _kernel_image(p, w, d, R, V, U) -> np.ndarray:
     """The slice's PSF: each instant is a V x U grid of dots spaced ``d^2 p / R`` px (bilinear splats)."""
     uc = np.arange(U) - (U - 1) / 2.0
