@@ -72,11 +72,13 @@ def test_reader_opens_the_camera_path_a_file_holds(tmp_path, lf_rgb):
     from napari_lfdeblur.path import bezier_positions, load_path_json
 
     cp = np.array([[-1.0, 0.5, 0.2], [0.0, -0.5, 0.0], [1.0, 0.0, -0.2]])
-    write_lightfield(tmp_path / "out.npz", lf_rgb, control_points=cp, metadata={"n_times": 9})
+    write_lightfield(tmp_path / "out.npz", lf_rgb, control_points=cp,
+                     metadata={"n_times": 9, "infinity_disparity": -0.5})
     (data, kw, kind), (shapes, path_kw, path_kind) = read_lightfield_layer(tmp_path / "out.npz")
     assert kind == "image" and path_kind == "shapes" and path_kw["name"] == "out path"
     np.testing.assert_allclose(path_kw["metadata"]["control_points"], load_path_json(tmp_path / "out.path.json"))
     assert path_kw["metadata"]["n_times"] == 9 and path_kw["metadata"]["source_layer"] == "out"
+    assert path_kw["metadata"]["infinity_disparity"] == -0.5  # the whole blur model goes with the path
     # the polyline is the path at the file's 9 instants, in the frame of the centre view
     V, U, Y, X = lf_rgb.shape[:4]
     (line,) = [s for s, k in zip(shapes, path_kw["features"]["kind"]) if k == "path"]
@@ -153,6 +155,41 @@ def test_viewer_open_real_lytro(make_napari_viewer):
     assert layer.data.shape == (10, 10, 256, 256, 3) and layer.rgb
     np.testing.assert_allclose(layer.metadata["view_shifts"], [[0.0, 0.64], [0.64, 0.0]], atol=0.05)
     assert tuple(layer.axis_labels) == ("v", "u", "y", "x")
+
+
+def test_path_writer(tmp_path):
+    from napari_lfdeblur._napari.layers import path_layer_data
+    from napari_lfdeblur._napari.writer import write_path_json
+    from napari_lfdeblur.path import read_path_json, shake6_path
+
+    cp = shake6_path(1.0, seed=2, rotation=0.01)
+    shapes, kw, _ = path_layer_data(cp, (5, 5, 16, 16), n_times=12, infinity_disparity=1.5, name="p")
+    (written,) = write_path_json(str(tmp_path / "p"), shapes, kw)
+    assert Path(written).name == "p.json"
+    back, fields = read_path_json(written)
+    np.testing.assert_allclose(back, cp, rtol=0, atol=0)
+    assert (fields["n_times"], fields["infinity_disparity"]) == (12, 1.5)
+    with pytest.raises(FileExistsError):
+        write_path_json(written, shapes, kw)
+    with pytest.raises(ValueError, match="'rect' holds no camera path"):
+        write_path_json(str(tmp_path / "r.json"), [np.zeros((4, 2))], {"name": "rect", "metadata": {}})
+    with pytest.raises(ValueError, match="'odd': control points must be"):
+        write_path_json(str(tmp_path / "o.json"), [], {"name": "odd", "metadata": {"control_points": [[0, 1]] * 3}})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.json"]
+
+
+def test_viewer_saves_a_path_layer_as_json(make_napari_viewer, tmp_path):
+    from napari_lfdeblur._napari.layers import add_layer, path_layer_data
+    from napari_lfdeblur.path import arc_path, read_path_json
+
+    viewer = make_napari_viewer()
+    cp = arc_path(length=2.0, bend=0.3)
+    layer = add_layer(viewer, path_layer_data(cp, (5, 5, 16, 16), n_times=8, infinity_disparity=0.5, name="est"))
+    viewer.layers.selection = {layer}
+    viewer.layers.save(str(tmp_path / "est.json"), plugin="napari-lfdeblur")
+    back, fields = read_path_json(tmp_path / "est.json")
+    np.testing.assert_allclose(back, cp)
+    assert (fields["n_times"], fields["infinity_disparity"]) == (8, 0.5)
 
 
 def test_viewer_save_layer_with_plugin_writer(make_napari_viewer, tmp_path, lf_rgb):

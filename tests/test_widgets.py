@@ -98,6 +98,7 @@ def test_simulate_adds_blurred_and_path_layers(make_napari_viewer, qtbot, lf, no
 
     path = viewer.layers["sharp blurred path"]
     assert path.shape_type == ["rectangle", "path", "ellipse"]
+    assert (path.metadata["n_times"], path.metadata["infinity_disparity"]) == (8, 0.5)
     s = path.metadata["pixels_per_view"]
     assert s == pytest.approx(16 / (2 * 5))
     pos = bezier_positions(cp, 8)
@@ -814,6 +815,11 @@ def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_v
     d.path_source.path_layer.set_layer("b rejected path")
     d.path_source.take_button.clicked.emit()
     np.testing.assert_allclose(d.table.control_points(), rejected)
+    assert d.form.infinity_disparity.value == 0.5
+    # the estimated path too holds the d_inf it was estimated with
+    d.form.infinity_disparity.value = 0.0
+    d.path_source.path_layer.set_layer("b estimated path")
+    d.path_source.take_button.clicked.emit()
     assert d.form.infinity_disparity.value == 0.5
     # with blur found nothing is rejected: no such layer
     def fake_found(lf, *, infinity_disparity, params, device, seed):

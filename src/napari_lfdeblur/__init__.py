@@ -31,6 +31,7 @@ _PUBLIC = {
     "preset_path": "path",
     "save_path_json": "path",
     "load_path_json": "path",
+    "read_path_json": "path",
     # forward model
     "simulate_blur": "blur",
     "BlurOperator": "blur",

@@ -257,6 +257,7 @@ def path_layer_data(
     n_times: int = 32,
     name: str = "camera path",
     true_control_points=None,
+    infinity_disparity: float | None = None,
     metadata: dict | None = None,
 ):
     """A Shapes layer data tuple that draws a camera path over the centre view.
@@ -272,6 +273,12 @@ def path_layer_data(
         Number of exposure instants at which the curve is sampled.
     true_control_points : array_like, shape (m, 3) or (m, 6), optional
         A known true path, drawn in cyan.
+    infinity_disparity : float, optional
+        The ``d_inf`` the path blurs with, kept in the metadata beside
+        ``n_times`` (so that a widget taking the path, or the path JSON
+        writer, has the whole blur model).
+    metadata : dict, optional
+        More metadata entries.
 
     Returns
     -------
@@ -308,6 +315,7 @@ def path_layer_data(
         "kind": "path",
         "control_points": cp.tolist(),
         "n_times": int(n_times),
+        **({} if infinity_disparity is None else {"infinity_disparity": float(infinity_disparity)}),
         "pixels_per_view": s,
         "lightfield_shape": [V, U, Y, X],
         "frame": PATH_FRAME,

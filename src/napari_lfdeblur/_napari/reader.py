@@ -74,7 +74,8 @@ def read_lightfield_layer(path, **options):
         holds a camera path, ...). Then, when the file holds a valid camera
         path, ``(shapes, kwargs, 'shapes')`` drawing it
         (:func:`~napari_lfdeblur._napari.layers.path_layer_data`, sampled at
-        the file's ``n_times``, else 32). A path the file states badly
+        the file's ``n_times``, else 32; its metadata holds the file's
+        ``n_times`` and ``infinity_disparity``). A path the file states badly
         draws nothing; the light field opens all the same.
     """
     p = Path(_single_path(path))
@@ -91,6 +92,7 @@ def read_lightfield_layer(path, **options):
         try:
             n_times = int(meta.get("n_times") or 32)
             layers.append(path_layer_data(meta["control_points"], lf.shape, n_times=n_times, name=f"{name} path",
+                                          infinity_disparity=meta.get("infinity_disparity"),
                                           metadata={"source_layer": name}))
         except (TypeError, ValueError):
             pass  # not a path this package can draw: the light field alone, its metadata as the file said

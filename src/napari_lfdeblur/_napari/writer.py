@@ -1,10 +1,12 @@
-"""napari writer contributions: save a light-field Image layer.
+"""napari writer contributions: save a light-field Image layer, or a camera path.
 
 One writer per format (``.npz``, ``.tif``, ``.h5``); each takes a single
 Image layer whose data is 4D ``(V, U, Y, X)`` (or 5D RGB) and writes it with
 :func:`napari_lfdeblur.io.write_lightfield` (float32, lossless, atomic).
 The layer's metadata goes with it; a camera path in
 ``metadata['control_points']`` is also written as ``<name>.path.json``.
+A path layer (a Shapes layer holding ``metadata['control_points']``, as the
+widgets and the reader add them) is saved as a path JSON file.
 An existing file is never replaced: save under a new name.
 """
 
@@ -14,10 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import write_lightfield
+from ..io import PATH_FIELDS, write_lightfield
 from ..io._write import sidecar_path_json
+from ..path import save_path_json
 
-__all__ = ["write_npz", "write_tiff", "write_h5", "write_layer"]
+__all__ = ["write_npz", "write_tiff", "write_h5", "write_layer", "write_path_json"]
 
 
 def write_layer(path: str, data, attributes: dict, suffix: str) -> list[str]:
@@ -68,3 +71,34 @@ def write_tiff(path: str, data, attributes: dict) -> list[str]:
 def write_h5(path: str, data, attributes: dict) -> list[str]:
     """npe2 writer: a light-field Image layer to ``.h5`` (dataset ``LF``)."""
     return write_layer(path, data, attributes, ".h5")
+
+
+def write_path_json(path: str, data, attributes: dict) -> list[str]:
+    """npe2 writer: the camera path of a path layer to a path JSON file.
+
+    The file is what :func:`napari_lfdeblur.path.save_path_json` writes: the
+    control points, and the ``n_times`` and ``infinity_disparity`` the layer
+    states, so that the *4D deconvolution* widget, ``lfdeblur deconvolve``
+    and :func:`~napari_lfdeblur.path.read_path_json` take the whole blur
+    model back. ``.json`` is added to ``path`` if missing.
+
+    Raises
+    ------
+    ValueError
+        If the layer holds no valid camera path (``metadata['control_points']``).
+    FileExistsError
+        If the file exists.
+    """
+    p = Path(path)
+    if p.suffix.lower() != ".json":
+        p = p.with_name(p.name + ".json")
+    meta = attributes.get("metadata") or {}
+    name = attributes.get("name", "")
+    if meta.get("control_points") is None:
+        raise ValueError(f"layer {name!r} holds no camera path (metadata['control_points']); only path layers, "
+                         "such as those the napari-lfdeblur widgets add, can be saved as a path JSON")
+    try:
+        extra = {key: meta[key] for key in PATH_FIELDS if key in meta}
+        return [str(save_path_json(p, meta["control_points"], **extra))]
+    except (TypeError, ValueError) as exc:  # a malformed path, or a field JSON cannot hold
+        raise ValueError(f"layer {name!r}: {exc}") from None

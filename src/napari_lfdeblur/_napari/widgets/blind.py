@@ -308,8 +308,10 @@ class BlindDeblurWidget(SolverWidget):
         path_name = f"{job['source']} estimated path"
         self._adopt_previews(name, path_name)
         out = add_layer(self.viewer, lightfield_layer_data(result.lightfield, name=name, metadata=meta))
+        d_inf = job["settings"]["infinity_disparity"]
         path = add_layer(self.viewer, path_layer_data(
-            cp, job["shape"], n_times=n_times, name=path_name, true_control_points=job["true"]))
+            cp, job["shape"], n_times=n_times, name=path_name, true_control_points=job["true"],
+            infinity_disparity=d_inf))
         layers = self.viewer.layers
         if layers.index(out) > layers.index(path):
             layers.move(layers.index(out), layers.index(path))  # the path is drawn over the light field
@@ -319,9 +321,7 @@ class BlindDeblurWidget(SolverWidget):
         if "rejected_path" in info:  # kept as a layer, for *Deconvolve 4D*: no need to estimate it again
             rejected = add_layer(self.viewer, path_layer_data(
                 info["rejected_path"], job["shape"], n_times=n_times, name=f"{job['source']} rejected path",
-                true_control_points=job["true"],
-                metadata={"kind": "rejected path",
-                          "infinity_disparity": job["settings"]["infinity_disparity"]}))
+                true_control_points=job["true"], infinity_disparity=d_inf, metadata={"kind": "rejected path"}))
             self.last_layers.append(rejected)
             note = f"; the path it rejected is in the layer '{rejected.name}', for Deconvolve 4D"
         self.plot.plot(cp, job["true"], n_times=max(64, n_times))

@@ -126,6 +126,7 @@ class SimulateBlurWidget(SolverWidget):
         )
         out = add_layer(self.viewer, lightfield_layer_data(blurred, name=name, metadata=meta))
         path = add_layer(self.viewer, path_layer_data(job["cp"], job["shape"], n_times=p["n_times"],
+                                                      infinity_disparity=p["infinity_disparity"],
                                                       name=f"{name} path"))
         self.last_layers = [out, path]
         self.plot.plot(job["cp"], n_times=p["n_times"])
