@@ -786,6 +786,25 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     assert not [n for n in notifications if n[0] == "error"], notifications
 
 
+def test_blind_takes_the_infinity_disparity_a_layer_states(make_napari_viewer, lf, notifications):
+    from napari_lfdeblur._napari.widgets import BlindDeblurWidget
+
+    viewer = make_napari_viewer()
+    stated = viewer.add_image(lf, name="capture", metadata={"infinity_disparity": -1.5})  # no path
+    odd = viewer.add_image(lf, name="odd", metadata={"infinity_disparity": "far"})
+    plain = viewer.add_image(lf, name="plain")
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(stated)
+    assert w.form.infinity_disparity.value == -1.5 and w.form.true_path.value is None
+    assert not notifications
+    w.layer_combo.set_layer(odd)  # a value the field cannot take: a warning, the field unchanged
+    assert w.form.infinity_disparity.value == -1.5
+    assert notifications == [("warning", "Blind deblur: layer 'odd' states infinity_disparity = 'far', which this "
+                                         "form cannot take (-20 to 20); infinity_disparity stays -1.5")]
+    w.layer_combo.set_layer(plain)  # states nothing: the user's value stays
+    assert w.form.infinity_disparity.value == -1.5
+
+
 def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_viewer, monkeypatch, lf,
                                                                     notifications):
     import napari_lfdeblur.blind as blind_core

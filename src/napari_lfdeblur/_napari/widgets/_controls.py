@@ -39,6 +39,7 @@ __all__ = [
     "notify_error",
     "notify_info",
     "notify_warning",
+    "set_stated",
     "spin",
 ]
 
@@ -60,6 +61,33 @@ def notify_info(message: str) -> None:
 def notify_warning(message: str) -> None:
     """Show a warning notification."""
     show_warning(message)
+
+
+def set_stated(field, value, source: str) -> bool:
+    """Set a numeric form field to a value a layer or a file states.
+
+    A value the field cannot take (not a number, not whole for an integer
+    field, outside the field's range) is left out with a warning
+    notification naming ``source``; the field keeps its value.
+
+    Returns
+    -------
+    bool
+        Whether the field took the value.
+    """
+    try:
+        number = float(value)
+        usable = not isinstance(value, bool) and field.min <= number <= field.max
+        if isinstance(field, SpinBox):
+            usable = usable and number == int(number)
+    except (TypeError, ValueError):
+        usable = False
+    if usable:
+        field.value = int(number) if isinstance(field, SpinBox) else number
+    else:
+        notify_warning(f"{source} states {field.name} = {value!r}, which this form cannot take "
+                       f"({field.min:g} to {field.max:g}); {field.name} stays {field.value:g}")
+    return usable
 
 
 def spin(name: str, value: int, lo: int, hi: int, label: str | None = None, tooltip: str = "") -> SpinBox:

@@ -52,7 +52,7 @@ from ..layers import (
     path_layer_data,
     remove_layer,
 )
-from ._controls import LayerChoice, device_choice, fspin, has_path, heading, notify_info, spin
+from ._controls import LayerChoice, device_choice, fspin, has_path, heading, notify_info, set_stated, spin
 from ._plots import LossPlot, PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -188,11 +188,15 @@ class BlindDeblurWidget(SolverWidget):
         self.form.light_restoration.enabled = not self.form.restore_anyway.value
 
     def _input_changed(self, *_):
+        """Take the true path and the infinity disparity the chosen layer states, where it states them."""
         layer = self.layer_combo.value
-        if layer is not None and has_path(layer):
+        if layer is None:
+            return
+        if has_path(layer):
             self.form.true_path.set_layer(layer)
-            if "infinity_disparity" in layer.metadata:
-                self.form.infinity_disparity.value = float(layer.metadata["infinity_disparity"])
+        if "infinity_disparity" in layer.metadata:
+            set_stated(self.form.infinity_disparity, layer.metadata["infinity_disparity"],
+                       f"{self.title}: layer {layer.name!r}")
 
     def true_path(self):
         """The chosen true path, or None.

@@ -24,7 +24,7 @@ from __future__ import annotations
 from magicgui.widgets import CheckBox, ComboBox
 
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata
-from ._controls import PathSource, PathTable, device_choice, fspin, has_path, heading, notify_warning, spin
+from ._controls import PathSource, PathTable, device_choice, fspin, has_path, heading, set_stated, spin
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -91,23 +91,8 @@ class DeconvolveWidget(SolverWidget):
         meta = metadata or {}
         for key in ("n_times", "infinity_disparity"):
             if key in meta:
-                self._set_stated(key, meta[key])
+                set_stated(self.form[key], meta[key], f"{self.title}: the path")
         self.table.set_control_points(control_points)
-
-    def _set_stated(self, key: str, value) -> None:
-        field = getattr(self.form, key)
-        try:
-            number = float(value)
-            usable = not isinstance(value, bool) and field.min <= number <= field.max
-            if key == "n_times":
-                usable = usable and number == int(number)
-        except (TypeError, ValueError):
-            usable = False
-        if usable:
-            field.value = int(number) if key == "n_times" else number
-        else:
-            notify_warning(f"{self.title}: the path states {key} = {value!r}, which this form cannot take "
-                           f"({field.min:g} to {field.max:g}); {key} stays {field.value:g}")
 
     def _input_changed(self, *_):
         """Take the path (and T, d_inf) of the chosen blurred layer when it holds one."""
