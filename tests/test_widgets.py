@@ -634,6 +634,33 @@ def test_path_json_file_fills_the_table(make_napari_viewer, tmp_path, notificati
     assert "n_times = 7.5" in notifications[0][1] and "infinity_disparity = 50.0" in notifications[1][1]
 
 
+def test_simulate_takes_a_path_from_a_json_file_or_a_layer(make_napari_viewer, qtbot, lf, tmp_path, notifications):
+    from napari_lfdeblur._napari.layers import add_layer, path_layer_data
+    from napari_lfdeblur._napari.widgets import SimulateBlurWidget
+    from napari_lfdeblur.path import arc_path, save_path_json, shake6_path
+
+    cp = arc_path(length=1.5, bend=0.4)
+    cp[:, 2] = [0.2, 0.0, -0.1]  # with p_z
+    save_path_json(tmp_path / "p.json", cp, n_times=6, infinity_disparity=0.5)
+    viewer = make_napari_viewer()
+    src = viewer.add_image(lf.copy(), name="sharp")
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.layer_combo.set_layer(src)
+    w.path_source.json_file.value = tmp_path / "p.json"
+    assert (w.form.n_times.value, w.form.infinity_disparity.value) == (6, 0.5)
+    w.run()
+    _wait_done(qtbot, w)
+    np.testing.assert_allclose(viewer.layers["sharp blurred"].data,
+                               simulate_blur(lf, cp, n_times=6, infinity_disparity=0.5), atol=1e-6)
+    cp6 = shake6_path(1.0, seed=1, rotation=0.01)
+    add_layer(viewer, path_layer_data(cp6, lf.shape, n_times=9, infinity_disparity=-0.5, name="other path"))
+    w.path_source.path_layer.set_layer("other path")
+    w.path_source.take_button.clicked.emit()
+    np.testing.assert_allclose(w.table.control_points(), cp6, atol=1e-6)
+    assert (w.form.n_times.value, w.form.infinity_disparity.value) == (9, -0.5)
+    assert not notifications
+
+
 def test_path_table_rows_can_be_added_and_removed(make_napari_viewer):
     from napari_lfdeblur._napari.widgets import SimulateBlurWidget
 

@@ -39,6 +39,7 @@ __all__ = [
     "notify_error",
     "notify_info",
     "notify_warning",
+    "fill_path",
     "set_stated",
     "spin",
 ]
@@ -88,6 +89,15 @@ def set_stated(field, value, source: str) -> bool:
         notify_warning(f"{source} states {field.name} = {value!r}, which this form cannot take "
                        f"({field.min:g} to {field.max:g}); {field.name} stays {field.value:g}")
     return usable
+
+
+def fill_path(form, table, control_points, metadata, source: str) -> None:
+    """Put a path found in a layer or a file into ``table``, and the ``n_times`` and ``infinity_disparity``
+    that ``metadata`` states into the fields of ``form`` (through :func:`set_stated`)."""
+    for key in ("n_times", "infinity_disparity"):
+        if key in (metadata or {}):
+            set_stated(form[key], metadata[key], source)
+    table.set_control_points(control_points)
 
 
 def spin(name: str, value: int, lo: int, hi: int, label: str | None = None, tooltip: str = "") -> SpinBox:

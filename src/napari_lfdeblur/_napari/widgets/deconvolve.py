@@ -24,7 +24,7 @@ from __future__ import annotations
 from magicgui.widgets import CheckBox, ComboBox
 
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata
-from ._controls import PathSource, PathTable, device_choice, fspin, has_path, heading, set_stated, spin
+from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, has_path, heading, spin
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -88,11 +88,7 @@ class DeconvolveWidget(SolverWidget):
         ``n_times``, outside the field's range) is left out with a warning
         notification; the field keeps its value.
         """
-        meta = metadata or {}
-        for key in ("n_times", "infinity_disparity"):
-            if key in meta:
-                set_stated(self.form[key], meta[key], f"{self.title}: the path")
-        self.table.set_control_points(control_points)
+        fill_path(self.form, self.table, control_points, metadata, f"{self.title}: the path")
 
     def _input_changed(self, *_):
         """Take the path (and T, d_inf) of the chosen blurred layer when it holds one."""

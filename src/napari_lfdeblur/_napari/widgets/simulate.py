@@ -5,7 +5,9 @@ A thin shell over :func:`napari_lfdeblur.simulate_blur`. The form (magicgui,
 ``device``; the path is edited in a table of control points (``table``; its
 *rotation* box adds the columns ``r_x, r_y, r_z`` in radians), filled from a
 preset (linear, arc, shake, shake6: a shake with camera rotation) or a
-random path with a seed (``path_form``). Running it adds:
+random path with a seed (``path_form``), or taken from a layer or a path
+JSON file (``path_source``, with the ``n_times`` and ``infinity_disparity``
+stated there). Running it adds:
 
 - ``'<source> blurred'``: the blurred light field (metadata: the path in
   ``'control_points'``, ``'n_times'``, ``'infinity_disparity'``, the
@@ -22,7 +24,7 @@ from magicgui.widgets import ComboBox, Container, PushButton
 from ...path import MAX_ROTATION, preset_path, random_path
 from ...progress import Progress
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata, path_layer_data
-from ._controls import PathTable, device_choice, fspin, heading, spin
+from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, heading, spin
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -61,10 +63,12 @@ class SimulateBlurWidget(SolverWidget):
             device_choice(),
         ])
         self.path_form = _path_form()
+        self.path_source = PathSource(napari_viewer, self.set_path, title=self.title)
         self.table = PathTable(preset_path("linear", 2.0))
         self.plot = PathPlot()
         self.epi = EpiPanel(napari_viewer)
-        self.assemble(before=[heading("Camera path"), self.path_form, self.table, self.plot], after=[self.epi])
+        self.assemble(before=[heading("Camera path"), self.path_form, self.path_source, self.table, self.plot],
+                      after=[self.epi])
         self.path_form.apply_preset.changed.connect(self.apply_preset)
         self.path_form.random.changed.connect(self.apply_random)
         self.table.changed.connect(self._replot)
@@ -78,6 +82,10 @@ class SimulateBlurWidget(SolverWidget):
         rotation = f.rotation.value if f.preset.value == "shake6" else None
         self.table.set_control_points(preset_path(f.preset.value, extent=f.extent.value, seed=f.seed.value,
                                                   rotation=rotation))
+
+    def set_path(self, control_points, metadata=None) -> None:
+        """Fill the table (and ``n_times``, ``infinity_disparity`` when ``metadata`` states them)."""
+        fill_path(self.form, self.table, control_points, metadata, f"{self.title}: the path")
 
     def apply_random(self, *_):
         """Fill the table with a random path (points, extent and seed from the form)."""
