@@ -168,6 +168,28 @@ def test_simulate_states_t_and_infinity_disparity_and_deblur_uses_it(lf_file, tm
     assert not (tmp_path / "o.npz").exists()
 
 
+@pytest.mark.filterwarnings("ignore:.*the views look transposed")  # random views, blurred
+def test_simulate_takes_t_and_infinity_disparity_from_the_path_file(lf_file, tmp_path, capsys):
+    lf, src = lf_file
+    cp = np.array([[0.3, -0.2, 0.1], [-0.5, 0.4, -0.2], [0.8, 0.1, 0.0]])
+    save_path_json(tmp_path / "p.json", cp, n_times=6, infinity_disparity=-0.5)
+    assert main(["simulate", str(src), str(tmp_path / "a.npz"), "--path", str(tmp_path / "p.json")]) == 0
+    np.testing.assert_allclose(read_lightfield(tmp_path / "a.npz"),
+                               simulate_blur(lf, cp, n_times=6, infinity_disparity=-0.5), atol=1e-6)
+    doc = json.loads((tmp_path / "a.path.json").read_text())
+    assert (doc["n_times"], doc["infinity_disparity"]) == (6, -0.5)
+    # the flags win over the file
+    assert main(["simulate", str(src), str(tmp_path / "b.npz"), "--path", str(tmp_path / "p.json"),
+                 "--n-times", "4", "--infinity-disparity", "0"]) == 0
+    np.testing.assert_allclose(read_lightfield(tmp_path / "b.npz"), simulate_blur(lf, cp, n_times=4), atol=1e-6)
+    # a file stating an unusable T: one line, nothing written
+    save_path_json(tmp_path / "bad.json", cp, n_times="many")
+    capsys.readouterr()
+    assert main(["simulate", str(src), str(tmp_path / "c.npz"), "--path", str(tmp_path / "bad.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "n_times" in err and not (tmp_path / "c.npz").exists()
+
+
 def test_simulate_shake6_writes_a_6_column_path(lf_file, tmp_path, capsys):
     lf, src = lf_file
     out = tmp_path / "b.npz"

@@ -101,15 +101,16 @@ def _read(args, **options):
     return lf, meta
 
 
-def _path_argument(text: str, n_times: int | None = None):
-    """Control points from ``--path``: a JSON file, or ``PRESET[:EXTENT[:SEED[:ROTATION]]]``.
+def _path_argument(text: str):
+    """Control points from ``--path`` (a JSON file, or ``PRESET[:EXTENT[:SEED[:ROTATION]]]``) and the fields
+    the file states (``read_path_json``; ``{}`` for a preset).
 
     ``ROTATION`` (radians) is for ``shake6`` only.
     """
-    from .path import PRESETS, load_path_json, preset_path
+    from .path import PRESETS, preset_path, read_path_json
 
     if Path(text).suffix.lower() == ".json" or Path(text).exists():
-        return load_path_json(text)
+        return read_path_json(text)
     name, *rest = text.split(":")
     if name not in PRESETS:
         raise CLIError(
@@ -126,7 +127,7 @@ def _path_argument(text: str, n_times: int | None = None):
         rotation = float(rest[2]) if len(rest) > 2 else None
     except ValueError:
         raise CLIError(f"--path {text!r}: expected PRESET[:EXTENT[:SEED]] or shake6:EXTENT:SEED:ROTATION") from None
-    return preset_path(name, extent=extent, seed=seed, rotation=rotation)
+    return preset_path(name, extent=extent, seed=seed, rotation=rotation), {}
 
 
 # ------------------------------------------------------------- simulate
@@ -142,8 +143,10 @@ def _add_simulate(sub):
                    "shake6 is shake plus a random camera rotation (handheld shake), written "
                    "shake6[:EXTENT[:SEED[:ROTATION]]] with ROTATION the largest rotation in radians (default 0.005, "
                    "at most 0.2)")
-    p.add_argument("--n-times", type=int, default=32, help="exposure instants T (default 32)")
-    p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
+    p.add_argument("--n-times", type=int, default=None,
+                   help="exposure instants T (default: the one a --path file states, else 32)")
+    p.add_argument("--infinity-disparity", type=float, default=None,
+                   help="d_inf in px/view (default: the one a --path file states, else 0)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
 
@@ -154,14 +157,13 @@ def _run_simulate(args):
 
     out = Path(args.output)
     _check_targets([out, sidecar_path_json(out)], args.overwrite)
-    cp = _path_argument(args.path)
+    cp, stated = _path_argument(args.path)
+    n_times = args.n_times if args.n_times is not None else stated.get("n_times", DEFAULT_N_TIMES)
+    d_inf = args.infinity_disparity if args.infinity_disparity is not None else stated.get("infinity_disparity", 0.0)
     lf, _ = _read(args)
-    blurred = simulate_blur(
-        lf, cp, n_times=args.n_times, infinity_disparity=args.infinity_disparity, device=args.device
-    )
+    blurred = simulate_blur(lf, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device)
     written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp,
-                               metadata={"kind": "blurred", "n_times": args.n_times,
-                                         "infinity_disparity": args.infinity_disparity})
+                               metadata={"kind": "blurred", "n_times": n_times, "infinity_disparity": d_inf})
     print(f"wrote {written} {blurred.shape}; its camera path, T and d_inf: {sidecar_path_json(written)}"
           f"{rotation_note(cp)}")
 
