@@ -673,6 +673,9 @@ def test_bad_options_and_types(tmp_path, lf_gray):
     (tmp_path / "a.xyz").write_text("?")
     with pytest.raises(LightFieldFormatError, match="unknown light-field file type"):
         read_lightfield(tmp_path / "a.xyz")
+    (tmp_path / "IMG_0001.LFR").write_bytes(b"\x89LFP")  # a raw Lytro capture: how to get views from it
+    with pytest.raises(LightFieldFormatError, match=r"raw plenoptic capture \(Lytro \.lfr\) must be decoded"):
+        read_lightfield(tmp_path / "IMG_0001.LFR")
     np.save(tmp_path / "b.npy", lf_gray * 3)
     with pytest.raises(LightFieldFormatError, match="value_range"):
         read_lightfield(tmp_path / "b.npy")

@@ -137,6 +137,13 @@ def detect_layout(path) -> str:
             f"{path}: a single image is not a light field by itself; if it is a lenslet mosaic pass "
             f"layout='eslf' (angular_size=A), if it is a grid of views pass layout='mosaic', grid=(V, U)"
         )
+    if suffix in (".lfr", ".lfp", ".raw"):
+        raise LightFieldFormatError(
+            f"{path}: a raw plenoptic capture (Lytro {suffix}) must be decoded into views first, with the "
+            f"camera's calibration: for example by the Light Field Toolbox for MATLAB (LFUtilDecodeLytroFolder), "
+            f"whose decoded .mat this reader opens, or by a tool that writes the views as images or a lenslet "
+            f"(ESLF) image"
+        )
     raise LightFieldFormatError(
         f"{path}: unknown light-field file type {suffix or '(no suffix)'!r}; supported: folders of views, "
         f".eslf.png, .mat, .h5/.hdf5, .npy, .npz, .tif/.tiff"
