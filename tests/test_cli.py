@@ -173,7 +173,9 @@ def test_simulate_takes_t_and_infinity_disparity_from_the_path_file(lf_file, tmp
     lf, src = lf_file
     cp = np.array([[0.3, -0.2, 0.1], [-0.5, 0.4, -0.2], [0.8, 0.1, 0.0]])
     save_path_json(tmp_path / "p.json", cp, n_times=6, infinity_disparity=-0.5)
+    capsys.readouterr()
     assert main(["simulate", str(src), str(tmp_path / "a.npz"), "--path", str(tmp_path / "p.json")]) == 0
+    assert f"using infinity_disparity = -0.5, as {tmp_path / 'p.json'} states" in capsys.readouterr().err
     np.testing.assert_allclose(read_lightfield(tmp_path / "a.npz"),
                                simulate_blur(lf, cp, n_times=6, infinity_disparity=-0.5), atol=1e-6)
     doc = json.loads((tmp_path / "a.path.json").read_text())

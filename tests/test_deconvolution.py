@@ -764,6 +764,13 @@ def test_cli_deconvolve(tmp_path, capsys):
     assert "weight" in capsys.readouterr().err
     assert main(["deconvolve", str(tmp_path / "missing.npz"), str(path_file), str(out), "--overwrite"]) == 2
     assert main(["deconvolve", str(src), str(tmp_path / "nopath.json"), str(out), "--overwrite"]) == 2
+    # a path file stating T or d_inf the model cannot take: one line naming the file and the option
+    capsys.readouterr()
+    for field, value, option in (("n_times", 7.5, "--n-times"), ("infinity_disparity", "far", "--infinity-disparity")):
+        save_path_json(tmp_path / "odd.json", cp, overwrite=True, **{field: value})
+        assert main(["deconvolve", str(src), str(tmp_path / "odd.json"), str(out), "--overwrite"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"odd.json states {field} = {value!r}" in err and option in err
 
 
 def test_cli_deconvolve_takes_the_path_the_input_holds(tmp_path, capsys):
@@ -776,7 +783,10 @@ def test_cli_deconvolve_takes_the_path_the_input_holds(tmp_path, capsys):
     # an .npy holds no metadata: its path, T and d_inf are in blurred.path.json beside it
     src = write_lightfield(tmp_path / "blurred.npy", blurred, control_points=cp,
                            metadata={"n_times": 8, "infinity_disparity": 0.5})
+    capsys.readouterr()
     assert main(["deconvolve", str(src), str(tmp_path / "out.npz"), "--iterations", "5", "--device", "cpu"]) == 0
+    err = capsys.readouterr().err  # where T and d_inf came from is said
+    assert f"using n_times = 8, as {src} states" in err and f"using infinity_disparity = 0.5, as {src} states" in err
     expected = deconvolve(blurred, cp, n_times=8, infinity_disparity=0.5, n_iter=5, device="cpu")
     np.testing.assert_allclose(read_lightfield(tmp_path / "out.npz"), expected, atol=1e-6)
     # a light field that holds no path: one line that says what to give

@@ -5,15 +5,49 @@ stores with a light field it computed."""
 from __future__ import annotations
 
 import json
+import math
+import sys
 from pathlib import Path
 
 import numpy as np
 
 __all__ = ["DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield", "describe_path",
-           "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note"]
+           "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note", "stated_value"]
 
-#: Instants a path is sampled at when its file does not state ``n_times`` (``info`` and ``deconvolve``)
+#: Instants a path is sampled at when its file does not state ``n_times`` (``info``, ``simulate``, ``deconvolve``)
 DEFAULT_N_TIMES = 32
+
+
+def stated_value(given, key: str, sources, default):
+    """A command's ``n_times`` or ``infinity_disparity``: ``given`` (its option) when set, else the value
+    the first of ``sources`` that states one states (said on stderr), else ``default``.
+
+    ``sources`` are ``(name, fields)`` pairs, such as a path file's fields or an input's metadata.
+
+    Raises
+    ------
+    ValueError
+        When the value taken from a source is not an integer >= 2 (``n_times``) or a finite number
+        (``infinity_disparity``); the message names the source and the option that overrides it.
+    """
+    if given is not None:
+        return given
+    option = "--" + key.replace("_", "-")
+    for name, fields in sources:
+        value = fields.get(key)
+        if value is None:
+            continue
+        if key == "n_times":
+            usable = isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 2
+            need = "a whole number >= 2"
+        else:
+            usable = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and math.isfinite(value)
+            need = "a finite number"
+        if not usable:
+            raise ValueError(f"{name} states {key} = {value!r}, which is not {need}; pass {option}")
+        print(f"using {key} = {value:g}, as {name} states ({option} overrides it)", file=sys.stderr)
+        return int(value) if key == "n_times" else float(value)
+    return default
 
 
 def describes(path) -> bool:

@@ -16,7 +16,15 @@ import warnings
 from pathlib import Path
 
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
-from ._cli_info import DEFAULT_N_TIMES, describe, describe_lightfield, describes, result_metadata, rotation_note
+from ._cli_info import (
+    DEFAULT_N_TIMES,
+    describe,
+    describe_lightfield,
+    describes,
+    result_metadata,
+    rotation_note,
+    stated_value,
+)
 from ._cli_types import angular_crop, fraction, gib, value_range
 
 __all__ = ["main"]
@@ -158,8 +166,8 @@ def _run_simulate(args):
     out = Path(args.output)
     _check_targets([out, sidecar_path_json(out)], args.overwrite)
     cp, stated = _path_argument(args.path)
-    n_times = args.n_times if args.n_times is not None else stated.get("n_times", DEFAULT_N_TIMES)
-    d_inf = args.infinity_disparity if args.infinity_disparity is not None else stated.get("infinity_disparity", 0.0)
+    n_times = stated_value(args.n_times, "n_times", [(args.path, stated)], DEFAULT_N_TIMES)
+    d_inf = stated_value(args.infinity_disparity, "infinity_disparity", [(args.path, stated)], 0.0)
     lf, _ = _read(args)
     blurred = simulate_blur(lf, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device)
     written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp,
@@ -212,23 +220,6 @@ def _add_deblur(sub):
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
 
 
-def _stated_infinity_disparity(given, meta: dict, source) -> float:
-    """``given`` when set, else the ``infinity_disparity`` the input's metadata states (said on stderr), else 0."""
-    if given is not None:
-        return given
-    stated = meta.get("infinity_disparity")
-    if stated is None:
-        return 0.0
-    try:
-        d_inf = float(stated)
-    except (TypeError, ValueError):
-        raise CLIError(f"{source} states infinity_disparity = {stated!r}, which is not a number; "
-                       "pass --infinity-disparity") from None
-    print(f"using infinity disparity {d_inf:g} px/view, as {source} states (--infinity-disparity overrides it)",
-          file=sys.stderr)
-    return d_inf
-
-
 def _run_deblur(args):
     from .blind import BlindParams, iter_blind_deblur
     from .progress import run_to_completion
@@ -256,7 +247,7 @@ def _run_deblur(args):
     if args.motion is not None:
         params = params.replace(motion=args.motion)
     lf, meta = _read(args)
-    d_inf = _stated_infinity_disparity(args.infinity_disparity, meta, args.input)
+    d_inf = stated_value(args.infinity_disparity, "infinity_disparity", [(args.input, meta)], 0.0)
     gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=args.device, seed=args.seed,
                             max_memory=args.max_memory)
     bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
@@ -408,11 +399,9 @@ def _run_deconvolve(args):
         raise CLIError(f"{args.input} holds no camera path (in itself or in a NAME.path.json beside it): "
                        "give its path file, lfdeblur deconvolve INPUT PATH.json OUTPUT")
     cp, stated = known or (validate_control_points(meta["control_points"]), meta)
-    n_times = args.n_times if args.n_times is not None else int(stated.get("n_times") or DEFAULT_N_TIMES)
-    given = args.infinity_disparity
-    if given is None and stated.get("infinity_disparity") is not None:
-        given = float(stated["infinity_disparity"])
-    d_inf = _stated_infinity_disparity(given, meta, args.input)
+    sources = [(args.path_json or args.input, stated), (args.input, meta)]  # the path's fields, then the input's
+    n_times = stated_value(args.n_times, "n_times", sources[:1], DEFAULT_N_TIMES)
+    d_inf = stated_value(args.infinity_disparity, "infinity_disparity", sources, 0.0)
     options = dict(method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
                    couple_channels=not args.separate_channels, saturation=not args.no_saturation)
     gen = iter_deconvolve(blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device, **options)
