@@ -115,6 +115,28 @@ def test_deblur_equals_the_serial_api_bit_for_bit(client, tmp_path):
             assert "rejected_control_points" not in doc
 
 
+def test_deblur_takes_each_inputs_stated_infinity_disparity(client, tmp_path):
+    rng = np.random.default_rng(2)
+    lf = rng.random((3, 3, 16, 16)).astype(np.float32)
+    (tmp_path / "in").mkdir()
+    write_lightfield(tmp_path / "in" / "half.npz", lf, metadata={"infinity_disparity": 0.5})  # as simulate's outputs
+    write_lightfield(tmp_path / "in" / "plain.npz", lf)
+    write_lightfield(tmp_path / "in" / "odd.npz", lf, metadata={"infinity_disparity": "far"})
+    report = deblur_many(tmp_path / "in" / "*.npz", tmp_path / "out", params=TINY, client=client, device="cpu")
+    assert (report.n_ok, report.n_failed) == (2, 1)
+    for name, d_inf in (("half", 0.5), ("plain", 0.0)):
+        assert json.loads((tmp_path / "out" / f"{name}.path.json").read_text())["infinity_disparity"] == d_inf
+    want = _serial(lambda: blind_deblur(lf, params=TINY, infinity_disparity=0.5, device="cpu",
+                                        seed=item_seed(0, "half.npz", 0)))
+    assert np.array_equal(read_lightfield(tmp_path / "out" / "half.npz"), want.lightfield)
+    rec = read_manifest(tmp_path / "out")["odd.npz"]
+    assert rec["status"] == "failed" and "odd.npz states infinity_disparity = 'far'" in rec["error"]
+    # given, it is every item's
+    deblur_many(tmp_path / "in" / "half.npz", tmp_path / "given", params=TINY, infinity_disparity=0.0,
+                client=client, device="cpu")
+    assert json.loads((tmp_path / "given" / "half.path.json").read_text())["infinity_disparity"] == 0.0
+
+
 def test_bad_items_are_recorded_and_the_others_complete(client, inputs, tmp_path, capsys):
     bad = tmp_path / "in"
     bad.mkdir()

@@ -29,7 +29,9 @@ def _common(p) -> None:
                    help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
                    help="cuda: run on workers with the resource GPU=1; auto: on them if any (default auto)")
-    p.add_argument("--infinity-disparity", type=float, default=0.0, help="d_inf in px/view (default 0)")
+    p.add_argument("--infinity-disparity", type=float, default=None,
+                   help="d_inf in px/view (simulate: default 0; deblur: default each input's own, the one its file "
+                   "states, as batch simulate's outputs do, else 0)")
     p.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
     p.add_argument("--value-range", type=value_range, default=None, metavar="LO,HI",
                    help="the stored values that become 0 and 1 when the inputs are read, such as 0,4095 for "
@@ -87,7 +89,9 @@ def _command(args) -> str:
                   "--noise", args.noise, "--n-times", args.n_times]
     else:
         words += ["--params", args.params] if args.params else ["--preset", args.preset]
-    words += ["--infinity-disparity", args.infinity_disparity, "--seed", args.seed]
+    if args.infinity_disparity is not None:
+        words += ["--infinity-disparity", args.infinity_disparity]
+    words += ["--seed", args.seed]
     if args.value_range is not None:
         words.append("--value-range=" + ("auto" if args.value_range == "auto" else "%r,%r" % args.value_range))
     return " ".join(shlex.quote(str(w)) for w in words)
@@ -116,6 +120,8 @@ def _run(args) -> int:
     n_inputs = len(expand_inputs(args.inputs))
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1; got {args.workers}")
+    if args.batch_command == "simulate" and args.infinity_disparity is None:
+        args.infinity_disparity = 0.0
     command = _command(args)
     if args.batch_command == "simulate":
         total = n_inputs * args.n_per_input

@@ -143,7 +143,8 @@ def simulate_dataset(inputs, out_dir, *, n_per_input: int = 1, path_kind: str = 
     return run_batch(specs, out_dir, client=client, workers=workers, device=device, card=card, callback=callback)
 
 
-def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float = 0.0, seed: int = 0, value_range=None,
+def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float | None = None, seed: int = 0,
+                value_range=None,
                 client=None, workers: int | None = None, device: str = "auto", overwrite: bool = False,
                 callback=None, command: str | None = None) -> BatchReport:
     """Deblur each input blindly (:func:`~napari_lfdeblur.blind.blind_deblur`) into ``out_dir``.
@@ -162,7 +163,11 @@ def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float = 0.0
     params : BlindParams, dict or str, optional
         As in :func:`~napari_lfdeblur.blind.blind_deblur` (a preset name, a
         nested dict, or parameters); default the ``default`` preset.
-    infinity_disparity : float, default 0.0
+    infinity_disparity : float, optional
+        ``d_inf`` for every item; by default each input's own: the one its
+        file states (:func:`~napari_lfdeblur.io.read_lightfield_with_metadata`,
+        as ``simulate_dataset``'s outputs do), else 0. An input that states
+        one that is not a finite number is a failed item.
     seed : int, default 0
     {common}
 
@@ -182,12 +187,13 @@ def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float = 0.0
     paths = expand_inputs(inputs)
     out_dir = Path(out_dir)
     reading = _reading(value_range)
-    parameters = {"params": json.loads(params.to_json()), "infinity_disparity": float(infinity_disparity), **reading}
+    d_inf = None if infinity_disparity is None else float(infinity_disparity)  # None: each input's own
+    parameters = {"params": json.loads(params.to_json()), "infinity_disparity": d_inf, **reading}
     version = _version()
     specs = [make_spec("deblur", p, 0, out_dir / f"{_stem(p)}.npz",
                        parameters=parameters, seed=seed, overwrite=overwrite, version=version) for p in paths]
     command = command or _call_text("deblur_many", paths, out_dir, params=parameters["params"], seed=seed,
-                                    infinity_disparity=float(infinity_disparity), **reading)
+                                    infinity_disparity=d_inf, **reading)
     card = {"kind": "deblur", "command": command, "parameters": parameters, "seed": seed, "version": version}
     return run_batch(specs, out_dir, client=client, workers=workers, device=device, card=card, callback=callback)
 

@@ -144,7 +144,7 @@ def item_metadata(spec: dict) -> dict:
             "parameters": spec["parameters"]}
 
 
-def _simulate(lf, spec: dict, device):
+def _simulate(lf, spec: dict, device, meta: dict):
     p = spec["parameters"]
     blurred, cp = simulate_item(lf, spec["name"], spec["index"], path_kind=p["path_kind"], extent=p["extent"],
                                 infinity_disparity=p["infinity_disparity"], noise=p["noise"], seed=spec["seed"],
@@ -152,15 +152,35 @@ def _simulate(lf, spec: dict, device):
     return blurred, cp, {"n_times": p["n_times"], "infinity_disparity": p["infinity_disparity"]}
 
 
-def _deblur(lf, spec: dict, device):
+def item_infinity_disparity(given, meta: dict, name: str) -> float:
+    """The ``d_inf`` an item is deblurred with: ``given`` when set, else the one the input states
+    (``meta``, as :func:`~napari_lfdeblur.io.read_lightfield_with_metadata` returns it), else 0.
+
+    Raises
+    ------
+    ValueError
+        When the input states a value that is not a finite number.
+    """
+    if given is not None:
+        return float(given)
+    stated = meta.get("infinity_disparity")
+    if stated is None:
+        return 0.0
+    if isinstance(stated, bool) or not isinstance(stated, (int, float)) or not np.isfinite(stated):
+        raise ValueError(f"{name} states infinity_disparity = {stated!r}, which is not a finite number; "
+                         "give infinity_disparity")
+    return float(stated)
+
+
+def _deblur(lf, spec: dict, device, meta: dict):
     from ..blind import BlindParams, blind_deblur
 
     p = spec["parameters"]
     params = BlindParams.from_dict(p["params"])
-    result = blind_deblur(lf, params=params, infinity_disparity=p["infinity_disparity"], device=device,
-                          seed=spec["item_seed"])
+    d_inf = item_infinity_disparity(p["infinity_disparity"], meta, Path(spec["input"]).name)
+    result = blind_deblur(lf, params=params, infinity_disparity=d_inf, device=device, seed=spec["item_seed"])
     info = result.info
-    extra = {"n_times": params.n_times, "infinity_disparity": p["infinity_disparity"],
+    extra = {"n_times": params.n_times, "infinity_disparity": d_inf,
              "timings": result.timings, "blur_found": bool(info.get("blur_found", True)),
              "restoration": info.get("restoration", "full")}
     if "message" in info:
@@ -215,7 +235,7 @@ def _run(spec: dict, out: Path, rec: dict) -> None:
     import torch
 
     from ..devices import select_device
-    from ..io import read_lightfield, write_lightfield
+    from ..io import read_lightfield_with_metadata, write_lightfield
     from ..path import save_path_json
 
     try:
@@ -227,8 +247,8 @@ def _run(spec: dict, out: Path, rec: dict) -> None:
             rec.update(kept)
         else:
             compute = _simulate if spec["kind"] == "simulate" else _deblur
-            lf = read_lightfield(spec["input"], value_range=spec["parameters"].get("value_range"))
-            result, cp, extra = compute(lf, spec, device)
+            lf, meta = read_lightfield_with_metadata(spec["input"], value_range=spec["parameters"].get("value_range"))
+            result, cp, extra = compute(lf, spec, device, meta)
             save_path_json(spec["path_json"], cp, overwrite=True, **extra)
             meta = {"batch": item_metadata(spec), "control_points": np.asarray(cp).tolist(),
                     "version": spec["version"]}
