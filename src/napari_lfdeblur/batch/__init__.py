@@ -144,9 +144,8 @@ def simulate_dataset(inputs, out_dir, *, n_per_input: int = 1, path_kind: str = 
 
 
 def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float | None = None, seed: int = 0,
-                value_range=None,
-                client=None, workers: int | None = None, device: str = "auto", overwrite: bool = False,
-                callback=None, command: str | None = None) -> BatchReport:
+                value_range=None, client=None, workers: int | None = None, device: str = "auto",
+                overwrite: bool = False, callback=None, command: str | None = None) -> BatchReport:
     """Deblur each input blindly (:func:`~napari_lfdeblur.blind.blind_deblur`) into ``out_dir``.
 
     The input named ``name`` gives ``out_dir/<name stem>.npz`` (the sharp
