@@ -813,8 +813,8 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     assert not [n for n in notifications if n[0] == "error"], notifications
 
 
-def test_blind_takes_the_infinity_disparity_a_layer_states(make_napari_viewer, lf, notifications):
-    from napari_lfdeblur._napari.widgets import BlindDeblurWidget
+def test_widgets_take_the_infinity_disparity_a_layer_states(make_napari_viewer, lf, notifications):
+    from napari_lfdeblur._napari.widgets import BlindDeblurWidget, DeconvolveWidget
 
     viewer = make_napari_viewer()
     stated = viewer.add_image(lf, name="capture", metadata={"infinity_disparity": -1.5})  # no path
@@ -830,6 +830,10 @@ def test_blind_takes_the_infinity_disparity_a_layer_states(make_napari_viewer, l
                                          "form cannot take (-20 to 20); infinity_disparity stays -1.5")]
     w.layer_combo.set_layer(plain)  # states nothing: the user's value stays
     assert w.form.infinity_disparity.value == -1.5
+    # the deconvolution widget too (the path comes from elsewhere)
+    d = _dock(viewer, DeconvolveWidget(viewer))
+    d.layer_combo.set_layer(stated)
+    assert d.form.infinity_disparity.value == -1.5
 
 
 def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_viewer, monkeypatch, lf,

@@ -14,6 +14,10 @@ arguments: ``n_times``, ``infinity_disparity``, ``method``, ``weight`` (None whe
 - a path JSON file (``path_source.json_file``);
 - or typed into the table.
 
+Each of these sets ``n_times`` and ``infinity_disparity`` too where it states
+them; a blurred layer that holds no path but states ``infinity_disparity``
+sets that.
+
 Running it adds ``'<source> deconvolved'`` with the parameters (and the weight
 the solve used, ``weight_used``, with ``noise_sigma``), the path and the
 package version in its metadata.
@@ -24,7 +28,7 @@ from __future__ import annotations
 from magicgui.widgets import CheckBox, ComboBox
 
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata
-from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, has_path, heading, spin
+from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, has_path, heading, set_stated, spin
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -91,10 +95,13 @@ class DeconvolveWidget(SolverWidget):
         fill_path(self.form, self.table, control_points, metadata, f"{self.title}: the path")
 
     def _input_changed(self, *_):
-        """Take the path (and T, d_inf) of the chosen blurred layer when it holds one."""
+        """Take the path (and T, d_inf) of the chosen blurred layer when it holds one, else the d_inf it states."""
         layer = self.layer_combo.value
         if layer is not None and has_path(layer):
             self.path_source.take_from(layer, quiet=True)
+        elif layer is not None and "infinity_disparity" in layer.metadata:
+            set_stated(self.form.infinity_disparity, layer.metadata["infinity_disparity"],
+                       f"{self.title}: layer {layer.name!r}")
 
     def _weight_mode(self, *_):
         """The weight field is editable only when the weight does not come from the noise."""
