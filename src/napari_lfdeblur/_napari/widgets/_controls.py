@@ -25,6 +25,7 @@ from ..layers import LayerError, control_points_from_layer, layer_kind
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "INFINITY_DISPARITY_TIP",
     "DEVICES",
     "ROTATION_COLUMNS",
     "LayerChoice",
@@ -46,6 +47,12 @@ __all__ = [
 
 #: the device choices of every widget
 DEVICES = ("auto", "cpu", "cuda")
+
+#: the tooltip of the *infinity disparity* field of the widgets that restore a capture
+INFINITY_DISPARITY_TIP = (
+    "disparity of points at infinity d_inf, px/view (0: a camera focused at infinity); filled in from the "
+    "layer or path when they state it. With the views' zero disparity on the focal plane, it is about the "
+    "disparity of the farthest content (sky, a far wall); it cannot be estimated from the blur (docs/blind.md)")
 
 
 def notify_error(message: str) -> None:

@@ -52,7 +52,17 @@ from ..layers import (
     path_layer_data,
     remove_layer,
 )
-from ._controls import LayerChoice, device_choice, fspin, has_path, heading, notify_info, set_stated, spin
+from ._controls import (
+    INFINITY_DISPARITY_TIP,
+    LayerChoice,
+    device_choice,
+    fspin,
+    has_path,
+    heading,
+    notify_info,
+    set_stated,
+    spin,
+)
 from ._plots import LossPlot, PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -136,9 +146,7 @@ def _fields(viewer) -> list:
         device_choice(),
         spin("seed", 0, 0, 2**31 - 1, tooltip="random seed of the initial path"),
         fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
-              tooltip="disparity of points at infinity d_inf, px/view (0: a camera focused at infinity). "
-              "With the views' zero disparity on the focal plane, it is about the disparity of the farthest "
-              "content (sky, a far wall); it cannot be estimated from the blur (docs/blind.md)"),
+              tooltip=INFINITY_DISPARITY_TIP),
         fspin("edge_anisotropy", 0.0, -2.0, 2.0, 0.05, label="views softer along x (px)",
               tooltip="how much softer the camera's views are along x than along y, px "
               "(0: the same; see docs/blind.md)"),

@@ -28,7 +28,18 @@ from __future__ import annotations
 from magicgui.widgets import CheckBox, ComboBox
 
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata
-from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, has_path, heading, set_stated, spin
+from ._controls import (
+    INFINITY_DISPARITY_TIP,
+    PathSource,
+    PathTable,
+    device_choice,
+    fill_path,
+    fspin,
+    has_path,
+    heading,
+    set_stated,
+    spin,
+)
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -43,7 +54,7 @@ def _fields() -> list:
     return [
         spin("n_times", 32, 2, 1024, label="instants T", tooltip="exposure instants T of the blur model"),
         fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
-              tooltip="infinity disparity d_inf, px/view"),
+              tooltip=INFINITY_DISPARITY_TIP),
         ComboBox(name="method", choices=[m for m in METHODS if m != "auto"], value="tv",
                  tooltip="tv: 4D total variation, any path and d_inf; inplane: the exact angular solve, "
                          "p_z = 0 and d_inf = 0 only"),
