@@ -5,7 +5,6 @@ stores with a light field it computed."""
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -30,23 +29,20 @@ def stated_value(given, key: str, sources, default):
         When the value taken from a source is not an integer >= 2 (``n_times``) or a finite number
         (``infinity_disparity``); the message names the source and the option that overrides it.
     """
+    from .io._write import check_path_field
+
     if given is not None:
         return given
     option = "--" + key.replace("_", "-")
     for name, fields in sources:
-        value = fields.get(key)
-        if value is None:
+        if fields.get(key) is None:
             continue
-        if key == "n_times":
-            usable = isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 2
-            need = "a whole number >= 2"
-        else:
-            usable = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and math.isfinite(value)
-            need = "a finite number"
-        if not usable:
-            raise ValueError(f"{name} states {key} = {value!r}, which is not {need}; pass {option}")
+        try:
+            value = check_path_field(key, fields[key], name)
+        except ValueError as exc:
+            raise ValueError(f"{exc}; pass {option}") from None
         print(f"using {key} = {value:g}, as {name} states ({option} overrides it)", file=sys.stderr)
-        return int(value) if key == "n_times" else float(value)
+        return value
     return default
 
 

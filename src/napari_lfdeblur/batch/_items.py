@@ -163,13 +163,14 @@ def item_infinity_disparity(given, meta: dict, name: str) -> float:
     """
     if given is not None:
         return float(given)
-    stated = meta.get("infinity_disparity")
-    if stated is None:
+    from ..io._write import check_path_field
+
+    if meta.get("infinity_disparity") is None:
         return 0.0
-    if isinstance(stated, bool) or not isinstance(stated, (int, float)) or not np.isfinite(stated):
-        raise ValueError(f"{name} states infinity_disparity = {stated!r}, which is not a finite number; "
-                         "give infinity_disparity")
-    return float(stated)
+    try:
+        return check_path_field("infinity_disparity", meta["infinity_disparity"], name)
+    except ValueError as exc:
+        raise ValueError(f"{exc}; give infinity_disparity") from None
 
 
 def _deblur(lf, spec: dict, device, meta: dict):

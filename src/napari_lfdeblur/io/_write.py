@@ -187,6 +187,27 @@ def _replaceable(name: str) -> bool:
 PATH_FIELDS = ("n_times", "infinity_disparity")
 
 
+def check_path_field(key: str, value, source: str):
+    """``value`` as the path field ``key`` (one of :data:`PATH_FIELDS`) that ``source`` states.
+
+    Returns an ``int`` for ``n_times``, a ``float`` for ``infinity_disparity``.
+
+    Raises
+    ------
+    ValueError
+        When ``n_times`` is not an integer >= 2 or ``infinity_disparity`` not a finite number; the
+        message names ``source``.
+    """
+    number = isinstance(value, (int, float, np.number)) and not isinstance(value, bool)
+    if key == "n_times":
+        usable, need = number and isinstance(value, (int, np.integer)) and value >= 2, "a whole number >= 2"
+    else:
+        usable, need = number and bool(np.isfinite(value)), "a finite number"
+    if not usable:
+        raise ValueError(f"{source} states {key} = {value!r}, which is not {need}")
+    return int(value) if key == "n_times" else float(value)
+
+
 def _path_fields(meta: dict) -> dict:
     return {k: meta[k] for k in PATH_FIELDS if k in meta}
 
