@@ -42,6 +42,30 @@ def test_simulate_with_json_path_and_no_overwrite(lf_file, tmp_path, capsys):
     assert out.read_bytes() == before
 
 
+def test_a_path_for_views_of_another_size_is_warned_about(lf_file, tmp_path, capsys):
+    lf, src = lf_file
+    cp = np.array([[0.3, -0.2, 0.4], [-0.5, 0.4, -0.3]])  # with p_z: its blur depends on the views' size
+    save_path_json(tmp_path / "other.json", cp, view_shape=[20, 12])
+    save_path_json(tmp_path / "own.json", cp, view_shape=[12, 12])
+    (tmp_path / "odd.json").write_text(json.dumps({"control_points": cp.tolist(), "view_shape": "big"}))
+    for name, said in (("other", "the path is for 20x12 views and these are 12x12"), ("own", None),
+                       ("odd", "view_shape = 'big', which is not two whole numbers")):
+        out = tmp_path / f"b_{name}.npz"
+        assert main(["simulate", str(src), str(out), "--path", str(tmp_path / f"{name}.json"), "--n-times", "6"]) == 0
+        err = capsys.readouterr().err
+        assert ("warning" in err) is bool(said) and (said is None or said in err)
+        np.testing.assert_allclose(read_lightfield(out), simulate_blur(lf, cp, n_times=6), atol=1e-6)  # it ran
+    # the blurred file's own path is for its views: no warning; the other file's is
+    args = ["--iterations", "2", "--device", "cpu"]
+    assert main(["deconvolve", str(tmp_path / "b_own.npz"), str(tmp_path / "d1.npz"), *args]) == 0
+    assert "warning" not in capsys.readouterr().err
+    assert main(["deconvolve", str(tmp_path / "b_own.npz"), str(tmp_path / "other.json"), str(tmp_path / "d2.npz"),
+                 *args]) == 0
+    err = capsys.readouterr().err
+    assert "lfdeblur deconvolve: warning: the path is for 20x12 views and these are 12x12" in err
+    assert "path_in_window" in err and (tmp_path / "d2.npz").exists()
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
@@ -349,6 +373,9 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     assert main(args + ["--overwrite", "--path-out", str(tmp_path / "p.json")]) == 0
     np.testing.assert_array_equal(load_path_json(tmp_path / "p.json"), load_path_json(tmp_path / "o.path.json"))
     np.testing.assert_allclose(load_path_json(tmp_path / "p_rejected.json"), rejected)
+    # every path file states the views it belongs to
+    for name in ("p.json", "p_rejected.json", "o.path.json"):
+        assert json.loads((tmp_path / name).read_text())["view_shape"] == list(lf.shape[2:4])
     # a --path-out into a missing folder: refused before the solve, the output left as it was
     before = (tmp_path / "o.npz").stat().st_mtime_ns
     assert main(args + ["--overwrite", "--path-out", str(tmp_path / "no" / "p.json")]) == 2

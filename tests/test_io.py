@@ -28,6 +28,7 @@ from napari_lfdeblur.io import (
     LightFieldReadError,
     ViewOrderWarning,
     detect_layout,
+    path_json_beside,
     probe_layout,
     read_lightfield,
     read_lightfield_with_metadata,
@@ -455,6 +456,11 @@ def test_every_format_reads_back_the_path_written_with_it(tmp_path, lf_gray, nam
     _, meta = read_lightfield_with_metadata(written)
     np.testing.assert_allclose(meta["control_points"], cp)
     assert meta["n_times"] == 12 and meta["infinity_disparity"] == -0.5
+    # the path file beside it states the views' size, whatever the metadata says
+    part = lf_gray[:3, :3, :5, :-1]
+    written = write_lightfield(tmp_path / ("b" + name), part, control_points=cp, layout=layout,
+                               metadata={"view_shape": [1, 1]})
+    assert json.loads(path_json_beside(written).read_text())["view_shape"] == list(part.shape[2:4])
 
 
 def test_a_path_file_that_holds_no_path_is_ignored_with_a_warning(tmp_path, lf_gray):

@@ -189,7 +189,7 @@ def test_viewer_saves_a_path_layer_as_json(make_napari_viewer, tmp_path):
     viewer.layers.save(str(tmp_path / "est.json"), plugin="napari-lfdeblur")
     back, fields = read_path_json(tmp_path / "est.json")
     np.testing.assert_allclose(back, cp)
-    assert (fields["n_times"], fields["infinity_disparity"]) == (8, 0.5)
+    assert (fields["n_times"], fields["infinity_disparity"], fields["view_shape"]) == (8, 0.5, [16, 16])
 
 
 def test_viewer_save_layer_with_plugin_writer(make_napari_viewer, tmp_path, lf_rgb):

@@ -199,6 +199,51 @@ def test_canonical_time_direction():
     np.testing.assert_array_equal(canonical_time_direction(out), out)
 
 
+def test_path_view_mismatch_speaks_exactly_when_the_blur_changes_on_other_views():
+    from napari_lfdeblur import simulate_blur
+    from napari_lfdeblur.path import path_in_window, path_view_mismatch, shake6_path
+
+    frame = np.random.default_rng(3).random((3, 3, 12, 20)).astype(np.float32)
+    window = (2, 5, 8, 10)
+
+    def crop(a):
+        return a[:, :, 2:10, 5:15]
+
+    def blur(lf, cp):
+        return simulate_blur(lf, cp, n_times=8)
+
+    # in-plane (d_inf = 0): blurring a crop is cropping the blurred frame, so there is nothing to say
+    in_plane = np.array([[-0.6, 0.2, 0.0], [0.7, -0.3, 0.0]])
+    np.testing.assert_allclose(blur(crop(frame), in_plane), crop(blur(frame, in_plane)), atol=1e-6)
+    assert path_view_mismatch(in_plane, crop(frame).shape, (12, 20)) is None
+    # with p_z the same control points blur the crop otherwise; path_in_window, which the message names, is right
+    with_pz = np.array([[-0.6, 0.2, 0.5], [0.7, -0.3, -0.4]])
+    wanted = crop(blur(frame, with_pz))
+    assert np.abs(blur(crop(frame), with_pz) - wanted).max() > 0.01
+    np.testing.assert_allclose(blur(crop(frame), path_in_window(with_pz, window, (12, 20))), wanted, atol=1e-5)
+    note = path_view_mismatch(with_pz, crop(frame).shape, (12, 20))
+    assert "12x20" in note and "8x10" in note and "its p_z" in note and "path_in_window" in note
+    # the same views, or views not stated: nothing to say
+    assert path_view_mismatch(with_pz, (3, 3, 12, 20, 3), (12, 20)) is None
+    assert path_view_mismatch(with_pz, (8, 10), None) is None
+    # a rotation cannot be moved to other views
+    cp6 = shake6_path(1.0, seed=1, rotation=0.01)
+    cp6[:, 2] = 0.0
+    assert "its rotation" in path_view_mismatch(cp6, (8, 10), (12, 20))
+    assert "cannot be moved" in path_view_mismatch(cp6, (8, 10), (12, 20))
+
+
+def test_save_path_json_checks_the_view_shape(tmp_path):
+    from napari_lfdeblur.path import read_path_json
+
+    f = save_path_json(tmp_path / "p.json", linear_path(1.0), view_shape=np.array([376, 541]))
+    assert read_path_json(f)[1]["view_shape"] == [376, 541]
+    for bad in ([3.5, 4], [0, 4], [4], "376x541"):
+        with pytest.raises(ValueError, match="view_shape .* not two whole numbers"):
+            save_path_json(tmp_path / "q.json", linear_path(1.0), view_shape=bad)
+    assert not (tmp_path / "q.json").exists()
+
+
 def test_elevate_degree_cannot_lower_the_degree():
     from napari_lfdeblur.path import elevate_degree
 

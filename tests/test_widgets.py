@@ -661,6 +661,48 @@ def test_simulate_takes_a_path_from_a_json_file_or_a_layer(make_napari_viewer, q
     assert not notifications
 
 
+def test_a_path_for_views_of_another_size_is_warned_about(make_napari_viewer, qtbot, lf, tmp_path, notifications):
+    from napari_lfdeblur._napari.layers import add_layer, path_layer_data
+    from napari_lfdeblur._napari.widgets import DeconvolveWidget, SimulateBlurWidget
+    from napari_lfdeblur.path import save_path_json
+
+    Y, X = lf.shape[2:4]
+    cp = np.array([[-0.4, 0.3, 0.3], [0.5, -0.2, -0.3]])  # with p_z: its blur depends on the views' size
+    save_path_json(tmp_path / "p.json", cp, n_times=6, view_shape=[Y, 2 * X])
+    viewer = make_napari_viewer()
+    viewer.add_image(lf.copy(), name="sharp")
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.path_source.json_file.value = tmp_path / "p.json"
+    w.run()
+    _wait_done(qtbot, w)
+    assert [kind for kind, _ in notifications] == ["warning"]
+    assert f"Simulate blur: the path is for {Y}x{2 * X} views and these are {Y}x{X}" in notifications[0][1]
+    assert "path_in_window" in notifications[0][1]
+    np.testing.assert_allclose(viewer.layers["sharp blurred"].data, simulate_blur(lf, cp, n_times=6), atol=1e-6)
+    # a preset is for any views: nothing to say
+    notifications.clear()
+    w.path_form.preset.value = "linear"
+    w.apply_preset()
+    w.table.set_control_points(cp)  # typed in: its views are not known
+    w.run()
+    _wait_done(qtbot, w)
+    assert not notifications
+    # the blurred layer's own path is for its views; a path layer of a larger light field is not
+    d = _dock(viewer, DeconvolveWidget(viewer))
+    d.form.layer.value = viewer.layers["sharp blurred"]  # takes its path
+    d.form.n_iter.value = 2
+    d.run()
+    _wait_done(qtbot, d)
+    assert not notifications
+    add_layer(viewer, path_layer_data(cp, (*lf.shape[:2], 2 * Y, X), n_times=6, name="big path"))
+    d.path_source.path_layer.set_layer("big path")
+    d.path_source.take_button.clicked.emit()
+    d.run()
+    _wait_done(qtbot, d)
+    assert [kind for kind, _ in notifications] == ["warning"]
+    assert f"4D deconvolution: the path is for {2 * Y}x{X} views and these are {Y}x{X}" in notifications[0][1]
+
+
 def test_path_table_rows_can_be_added_and_removed(make_napari_viewer):
     from napari_lfdeblur._napari.widgets import SimulateBlurWidget
 

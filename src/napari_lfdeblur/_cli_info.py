@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield", "describe_path",
-           "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note", "stated_value"]
+           "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note", "stated_value",
+           "warn_view_mismatch"]
 
 #: Instants a path is sampled at when its file does not state ``n_times`` (``info``, ``simulate``, ``deconvolve``)
 DEFAULT_N_TIMES = 32
@@ -44,6 +45,25 @@ def stated_value(given, key: str, sources, default):
         print(f"using {key} = {value:g}, as {name} states ({option} overrides it)", file=sys.stderr)
         return value
     return default
+
+
+def warn_view_mismatch(command: str, cp, shape, name, fields) -> None:
+    """Say on stderr when the path ``cp`` from ``name`` (whose ``fields`` may state its ``view_shape``) is for
+    views of another size than those of a light field of ``shape`` (:func:`~napari_lfdeblur.path.path_view_mismatch`).
+
+    An unusable stated ``view_shape`` is said too, and nothing is compared.
+    """
+    from .io._write import check_path_field
+    from .path import path_view_mismatch
+
+    if fields.get("view_shape") is None:
+        return
+    try:
+        note = path_view_mismatch(cp, shape, check_path_field("view_shape", fields["view_shape"], name))
+    except ValueError as exc:
+        note = f"{exc}; the path was not checked against the views' size"
+    if note:
+        print(f"lfdeblur {command}: warning: {note}", file=sys.stderr)
 
 
 def describes(path) -> bool:

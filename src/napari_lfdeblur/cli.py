@@ -24,6 +24,7 @@ from ._cli_info import (
     result_metadata,
     rotation_note,
     stated_value,
+    warn_view_mismatch,
 )
 from ._cli_types import angular_crop, fraction, gib, value_range
 
@@ -169,6 +170,7 @@ def _run_simulate(args):
     n_times = stated_value(args.n_times, "n_times", [(args.path, stated)], DEFAULT_N_TIMES)
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", [(args.path, stated)], 0.0)
     lf, _ = _read(args)
+    warn_view_mismatch("simulate", cp, lf.shape, args.path, stated)
     blurred = simulate_blur(lf, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device)
     written = write_lightfield(out, blurred, overwrite=args.overwrite, control_points=cp,
                                metadata={"kind": "blurred", "n_times": n_times, "infinity_disparity": d_inf})
@@ -271,6 +273,7 @@ def _run_deblur(args):
                      metadata=result_metadata("deblurred (blind)", params.to_dict(), **fields, timings=result.timings,
                                               preset=None if args.params else args.preset,
                                               final_weight=result.info.get("final_weight")))
+    fields["view_shape"] = list(lf.shape[2:4])  # the path files' only (the result's own shape says it)
     if extra_file is not None:
         save_path_json(extra_file, result.control_points, overwrite=True, **fields)
     if "message" in result.info:
@@ -402,6 +405,7 @@ def _run_deconvolve(args):
     sources = [(args.path_json or args.input, stated), (args.input, meta)]  # the path's fields, then the input's
     n_times = stated_value(args.n_times, "n_times", sources[:1], DEFAULT_N_TIMES)
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", sources, 0.0)
+    warn_view_mismatch("deconvolve", cp, blurred.shape, sources[0][0], stated)
     options = dict(method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
                    couple_channels=not args.separate_channels, saturation=not args.no_saturation)
     gen = iter_deconvolve(blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device, **options)

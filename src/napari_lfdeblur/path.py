@@ -35,6 +35,7 @@ __all__ = [
     "has_rotation",
     "path_in_frame",
     "path_in_window",
+    "path_view_mismatch",
     "validate_control_points",
     "validate_n_times",
     "sample_times",
@@ -248,10 +249,34 @@ def preset_path(name: str, extent: float = 2.0, seed: int = 0, rotation: float |
 def save_path_json(path, control_points, *, overwrite: bool = False, **extra) -> Path:
     """Write control points to a JSON file, with units and any ``extra`` fields.
 
-    The file is written to a temporary name and renamed, so a failure leaves
-    no half-written file. An existing file is kept unless ``overwrite``.
+    The fields the package reads back are ``n_times``, ``infinity_disparity``
+    and ``view_shape``, the ``(Y, X)`` of the views the path belongs to
+    (:func:`path_view_mismatch`). The file is written to a temporary name
+    and renamed, so a failure leaves no half-written file. An existing file
+    is kept unless ``overwrite``.
+
+    Raises
+    ------
+    FileExistsError
+        If the file exists and ``overwrite`` is False.
+    ValueError
+        On malformed control points or ``view_shape``.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> f = pathlib.Path(tempfile.mkdtemp()) / "path.json"
+    >>> _ = save_path_json(f, linear_path(2.0), n_times=32, view_shape=(376, 541))
+    >>> read_path_json(f)[1]["view_shape"]
+    [376, 541]
     """
     cp = validate_control_points(control_points)
+    if "view_shape" in extra:
+        from .io._write import check_path_field
+
+        shape = extra["view_shape"]
+        extra["view_shape"] = list(check_path_field("view_shape", list(shape) if np.ndim(shape) == 1 else shape,
+                                                    "the path"))
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
@@ -385,6 +410,57 @@ def path_in_window(cp, window, frame_shape) -> np.ndarray:
     rho, dy, dx = _window_geometry(window, frame_shape)
     out = np.stack([cp[:, 0] - dx * cp[:, 2], cp[:, 1] - dy * cp[:, 2], cp[:, 2] * rho], axis=1)
     return np.concatenate([out, cp[:, 3:]], axis=1)
+
+
+def path_view_mismatch(control_points, view_shape, stated_view_shape) -> str | None:
+    """Why a path found on views of ``stated_view_shape`` blurs views of ``view_shape`` differently, or None.
+
+    ``p_x`` and ``p_y`` are in views whatever the view's size, but ``p_z``
+    multiplies ``x~``, and a rotation moves the image by about ``R r`` px:
+    both are taken about the view's centre with ``R = max(Y, X) / 2``
+    (docs/model.md). So a path with ``p_z != 0`` or a rotation means another
+    blur on views of another size, such as a crop of the views it was found
+    on; :func:`path_in_window` and :func:`path_in_frame` move a path without
+    rotation between a crop and its frame.
+
+    Parameters
+    ----------
+    control_points : array_like, shape (n, 3) or (n, 6)
+    view_shape : tuple of int
+        ``(Y, X)`` of the views the path is applied to (a light field's
+        shape ``(V, U, Y, X[, C])`` is taken too).
+    stated_view_shape : tuple of 2 int or None
+        ``(Y, X)`` of the views the path was found on or made for, as a path
+        file states it (``view_shape``); None when not known.
+
+    Returns
+    -------
+    str or None
+        A sentence for people, or None when the sizes agree, are not known,
+        or the path has neither ``p_z`` nor a rotation.
+
+    Examples
+    --------
+    >>> path_view_mismatch([[0, 0, 0.5], [1, 0, -0.5]], (128, 128), (376, 541)) is not None
+    True
+    >>> path_view_mismatch([[0, 0, 0], [1, 0, 0]], (128, 128), (376, 541)) is None
+    True
+    """
+    cp = validate_control_points(control_points)
+    shape = tuple(int(s) for s in view_shape)
+    shape = shape[2:4] if len(shape) >= 4 else shape
+    if stated_view_shape is None or tuple(stated_view_shape) == shape:
+        return None
+    rotation = has_rotation(cp)
+    if not rotation and not np.any(cp[:, 2]):
+        return None
+    what = "p_z and rotation" if rotation and np.any(cp[:, 2]) else "rotation" if rotation else "p_z"
+    (a, b), (c, d) = stated_view_shape, shape
+    advice = ("a path with rotation cannot be moved between views of different sizes: estimate it on these views"
+              if rotation else "if these views are a crop of those, move the path with path_in_window first "
+              "(path_in_frame the other way round)")
+    return (f"the path is for {a}x{b} views and these are {c}x{d}: its {what} is taken about the view's centre "
+            f"and size (x~ = (x - (X - 1) / 2) / R, R = max(Y, X) / 2), so here it is another blur; {advice}")
 
 
 def _translation_only(cp, move: str) -> np.ndarray:

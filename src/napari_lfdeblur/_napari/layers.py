@@ -43,6 +43,8 @@ Camera path
     the rotation ``(r_x, r_y, r_z)`` of an ``(n, 6)`` path; the widgets plot
     every coordinate against ``t``. ``metadata`` holds ``'control_points'``
     (all 6 columns of a path with rotation), ``'n_times'``,
+    ``'infinity_disparity'`` (when known), ``'lightfield_shape'``,
+    ``'view_shape'`` (``[Y, X]``, the views the path belongs to),
     ``'pixels_per_view'``, ``'frame'`` (a sentence saying the above) and,
     for a path with rotation columns, ``'motion': '6dof'`` and
     ``'max_rotation_rad'`` (the largest ``|r|`` along the path).
@@ -318,6 +320,7 @@ def path_layer_data(
         **({} if infinity_disparity is None else {"infinity_disparity": float(infinity_disparity)}),
         "pixels_per_view": s,
         "lightfield_shape": [V, U, Y, X],
+        "view_shape": [Y, X],
         "frame": PATH_FRAME,
     }
     if cp.shape[1] == 6:

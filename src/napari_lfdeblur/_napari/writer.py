@@ -77,10 +77,11 @@ def write_path_json(path: str, data, attributes: dict) -> list[str]:
     """npe2 writer: the camera path of a path layer to a path JSON file.
 
     The file is what :func:`napari_lfdeblur.path.save_path_json` writes: the
-    control points, and the ``n_times`` and ``infinity_disparity`` the layer
-    states, so that the *4D deconvolution* widget, ``lfdeblur deconvolve``
-    and :func:`~napari_lfdeblur.path.read_path_json` take the whole blur
-    model back. ``.json`` is added to ``path`` if missing.
+    control points, and the ``n_times``, ``infinity_disparity`` and
+    ``view_shape`` the layer states, so that the *4D deconvolution* widget,
+    ``lfdeblur deconvolve`` and :func:`~napari_lfdeblur.path.read_path_json`
+    take the whole blur model back (and can tell a path for views of
+    another size). ``.json`` is added to ``path`` if missing.
 
     Raises
     ------

@@ -250,7 +250,7 @@ def _run(spec: dict, out: Path, rec: dict) -> None:
             compute = _simulate if spec["kind"] == "simulate" else _deblur
             lf, meta = read_lightfield_with_metadata(spec["input"], value_range=spec["parameters"].get("value_range"))
             result, cp, extra = compute(lf, spec, device, meta)
-            save_path_json(spec["path_json"], cp, overwrite=True, **extra)
+            save_path_json(spec["path_json"], cp, overwrite=True, **extra, view_shape=lf.shape[2:4])
             meta = {"batch": item_metadata(spec), "control_points": np.asarray(cp).tolist(),
                     "version": spec["version"]}
             write_lightfield(out, result, overwrite=spec["overwrite"] or out.exists(), metadata=meta,

@@ -183,33 +183,45 @@ def _replaceable(name: str) -> bool:
     return bool(_VIEW_NAME.match(name)) or name in SIDECAR_NAMES
 
 
-#: metadata fields that describe a path's blur, copied into its path JSON so that a path file states them too
-PATH_FIELDS = ("n_times", "infinity_disparity")
+#: metadata fields that describe a path's blur, copied into its path JSON so that a path file states them too:
+#: the instants, the infinity disparity and the ``(Y, X)`` of the views the path belongs to (``p_z`` and a
+#: rotation are taken about the view's centre and size: :func:`~napari_lfdeblur.path.path_view_mismatch`)
+PATH_FIELDS = ("n_times", "infinity_disparity", "view_shape")
 
 
 def check_path_field(key: str, value, source: str):
     """``value`` as the path field ``key`` (one of :data:`PATH_FIELDS`) that ``source`` states.
 
-    Returns an ``int`` for ``n_times``, a ``float`` for ``infinity_disparity``.
+    Returns an ``int`` for ``n_times``, a ``float`` for ``infinity_disparity``
+    and a tuple of two ``int`` for ``view_shape``.
 
     Raises
     ------
     ValueError
-        When ``n_times`` is not an integer >= 2 or ``infinity_disparity`` not a finite number; the
-        message names ``source``.
+        When ``n_times`` is not an integer >= 2, ``infinity_disparity`` not a finite number or
+        ``view_shape`` not two integers >= 1; the message names ``source``.
     """
-    number = isinstance(value, (int, float, np.number)) and not isinstance(value, bool)
-    if key == "n_times":
-        usable, need = number and isinstance(value, (int, np.integer)) and value >= 2, "a whole number >= 2"
+    def whole(v, least):
+        return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= least
+
+    if key == "view_shape":
+        usable = isinstance(value, (list, tuple)) and len(value) == 2 and all(whole(v, 1) for v in value)
+        need = "two whole numbers >= 1 (the views' Y, X)"
+    elif key == "n_times":
+        usable, need = whole(value, 2), "a whole number >= 2"
     else:
+        number = isinstance(value, (int, float, np.number)) and not isinstance(value, bool)
         usable, need = number and bool(np.isfinite(value)), "a finite number"
     if not usable:
         raise ValueError(f"{source} states {key} = {value!r}, which is not {need}")
+    if key == "view_shape":
+        return tuple(int(v) for v in value)
     return int(value) if key == "n_times" else float(value)
 
 
 def _path_fields(meta: dict) -> dict:
-    return {k: meta[k] for k in PATH_FIELDS if k in meta}
+    """The fields of the path JSON written with a light field of metadata ``meta``: its views' size too."""
+    return {**{k: meta[k] for k in PATH_FIELDS if k in meta}, "view_shape": list(meta["shape"][2:4])}
 
 
 def _write_views(path, data, meta, cp, *, overwrite):

@@ -19,7 +19,8 @@ from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, FloatSpinB
 from napari.utils.notifications import show_error, show_info, show_warning
 
 from ...io import PATH_FIELDS
-from ...path import MAX_ROTATION, read_path_json, validate_control_points
+from ...io._write import check_path_field
+from ...path import MAX_ROTATION, path_view_mismatch, read_path_json, validate_control_points
 from ..layers import LayerError, control_points_from_layer, layer_kind
 
 log = logging.getLogger(__name__)
@@ -41,6 +42,7 @@ __all__ = [
     "notify_info",
     "notify_warning",
     "fill_path",
+    "warn_view_mismatch",
     "set_stated",
     "spin",
 ]
@@ -100,11 +102,29 @@ def set_stated(field, value, source: str) -> bool:
 
 def fill_path(form, table, control_points, metadata, source: str) -> None:
     """Put a path found in a layer or a file into ``table``, and the ``n_times`` and ``infinity_disparity``
-    that ``metadata`` states into the fields of ``form`` (through :func:`set_stated`)."""
+    that ``metadata`` states into the fields of ``form`` (through :func:`set_stated`).
+
+    The ``view_shape`` it states goes to the table; an unusable one is left out with a warning.
+    """
+    metadata = metadata or {}
     for key in ("n_times", "infinity_disparity"):
-        if key in (metadata or {}):
+        if key in metadata:
             set_stated(form[key], metadata[key], source)
-    table.set_control_points(control_points)
+    view_shape = None
+    if metadata.get("view_shape") is not None:
+        try:
+            view_shape = check_path_field("view_shape", metadata["view_shape"], source)
+        except ValueError as exc:
+            notify_warning(f"{exc}; the path will not be checked against the views' size")
+    table.set_control_points(control_points, view_shape)
+
+
+def warn_view_mismatch(title: str, table, shape) -> None:
+    """A warning notification when the path of ``table`` is for views of another size than a light field of
+    ``shape`` (:func:`~napari_lfdeblur.path.path_view_mismatch`); it runs all the same."""
+    note = path_view_mismatch(table.control_points(), shape, table.view_shape)
+    if note:
+        notify_warning(f"{title}: {note}")
 
 
 def spin(name: str, value: int, lo: int, hi: int, label: str | None = None, tooltip: str = "") -> SpinBox:
@@ -214,7 +234,9 @@ class PathTable(Container):
     within :data:`~napari_lfdeblur.path.MAX_ROTATION`). Unticking it hides
     the rotation columns (they come back if it is ticked again with as many
     rows). Its ``changed`` signal fires when a cell is edited, the points
-    are set or the rotation columns are shown or hidden.
+    are set or the rotation columns are shown or hidden. ``view_shape`` is
+    the ``(Y, X)`` of the views the path came with (None: not known, as for
+    a preset), which :func:`warn_view_mismatch` compares with the input's.
     """
 
     def __init__(self, control_points=None, name: str = "path_table"):
@@ -257,12 +279,14 @@ class PathTable(Container):
         self.table.min_height = 130 if len(columns) > 3 else 110  # room for the sideways scroll bar
         self.changed.emit(self)
 
-    def set_control_points(self, control_points) -> None:
+    def set_control_points(self, control_points, view_shape=None) -> None:
         """Fill the table with an ``(n, 3)`` or ``(n, 6)`` array (shown to 6 significant digits).
 
-        The *rotation* box follows the array's width.
+        The *rotation* box follows the array's width. ``view_shape``: the
+        ``(Y, X)`` of the views the path belongs to, when known.
         """
         cp = validate_control_points(control_points)
+        self.view_shape = view_shape
         self._syncing = True
         try:
             self.rotation.value = cp.shape[1] == 6
@@ -352,7 +376,11 @@ class PathSource(Container):
             if not quiet:
                 notify_error(f"{self._title}: {exc}")
             return False
-        self._on_path(cp, dict(layer.metadata))
+        meta = dict(layer.metadata)
+        shape = tuple(getattr(layer.data, "shape", ())) if layer_kind(layer) == "image" else ()
+        if "view_shape" not in meta and len(shape) >= 4:
+            meta["view_shape"] = list(shape[2:4])  # a light field's path is for its own views
+        self._on_path(cp, meta)
         return True
 
     def take_path(self, *_):

@@ -39,6 +39,7 @@ from ._controls import (
     heading,
     set_stated,
     spin,
+    warn_view_mismatch,
 )
 from ._plots import PathPlot
 from ._runner import SolverWidget
@@ -144,6 +145,7 @@ class DeconvolveWidget(SolverWidget):
         p = self.parameters()
         # argument errors surface here, in the GUI thread, as a notification
         gen = iter_deconvolve(lf, cp, **p)
+        warn_view_mismatch(self.title, self.table, lf.shape)
         self._job = {"source": layer.name, "cp": cp, "params": p}
         return lambda: gen
 

@@ -24,7 +24,7 @@ from magicgui.widgets import ComboBox, Container, PushButton
 from ...path import MAX_ROTATION, preset_path, random_path
 from ...progress import Progress
 from ..layers import add_layer, lightfield_layer_data, lightfield_metadata, path_layer_data
-from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, heading, spin
+from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, heading, spin, warn_view_mismatch
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -110,6 +110,7 @@ class SimulateBlurWidget(SolverWidget):
 
         cp = self.table.control_points()
         params = self.parameters()
+        warn_view_mismatch(self.title, self.table, lf.shape)
         self._job = {"source": layer.name, "cp": cp, "params": params, "shape": lf.shape}
 
         def job():
