@@ -64,6 +64,11 @@ def test_a_path_for_views_of_another_size_is_warned_about(lf_file, tmp_path, cap
     err = capsys.readouterr().err
     assert "lfdeblur deconvolve: warning: the path is for 20x12 views and these are 12x12" in err
     assert "path_in_window" in err and (tmp_path / "d2.npz").exists()
+    # an input cropped by another program, its path file kept: said once (by the reader), and it runs
+    np.save(tmp_path / "c.npy", read_lightfield(tmp_path / "b_own.npz")[:, :, 2:])
+    (tmp_path / "c.path.json").write_text((tmp_path / "b_own.path.json").read_text())
+    assert main(["deconvolve", str(tmp_path / "c.npy"), str(tmp_path / "d3.npz"), *args]) == 0
+    assert capsys.readouterr().err.count("the path is for 12x12 views and these are 10x12") == 1
 
 
 @pytest.mark.parametrize(

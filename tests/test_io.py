@@ -463,6 +463,25 @@ def test_every_format_reads_back_the_path_written_with_it(tmp_path, lf_gray, nam
     assert json.loads(path_json_beside(written).read_text())["view_shape"] == list(part.shape[2:4])
 
 
+def test_a_path_file_for_views_of_another_size_is_read_with_a_warning(tmp_path, lf_gray):
+    import warnings
+
+    Y, X = lf_gray.shape[2:4]
+    for name, cp in (("pz", [[0, 0, 0.3], [1, 0, -0.3]]), ("flat", [[0, 0, 0], [1, 0.5, 0]])):
+        write_lightfield(tmp_path / f"{name}.npy", lf_gray, control_points=cp)
+        np.save(tmp_path / f"{name}.npy", lf_gray[:, :, 2:-2])  # cropped by another program; its path file kept
+    with pytest.warns(UserWarning, match=rf"pz.path.json: the path is for {Y}x{X} views and these are {Y - 4}x{X}"):
+        _, meta = read_lightfield_with_metadata(tmp_path / "pz.npy")
+    assert meta["view_shape"] == [Y, X] and meta["control_points"] == [[0, 0, 0.3], [1, 0, -0.3]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_lightfield_with_metadata(tmp_path / "flat.npy")  # an in-plane path blurs any crop alike: nothing said
+    doc = json.loads((tmp_path / "pz.path.json").read_text())
+    (tmp_path / "pz.path.json").write_text(json.dumps({**doc, "view_shape": "tall"}))
+    with pytest.warns(UserWarning, match="view_shape = 'tall'.*not checked against the views' size"):
+        read_lightfield_with_metadata(tmp_path / "pz.npy")
+
+
 def test_a_path_file_that_holds_no_path_is_ignored_with_a_warning(tmp_path, lf_gray):
     np.save(tmp_path / "a.npy", lf_gray)
     (tmp_path / "a.path.json").write_text('{"control_points": [[1, 2]]}')

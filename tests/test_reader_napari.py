@@ -88,6 +88,21 @@ def test_reader_opens_the_camera_path_a_file_holds(tmp_path, lf_rgb):
     np.testing.assert_allclose(line, expected, atol=1e-9)
 
 
+def test_reader_path_layer_keeps_the_views_its_file_states(tmp_path, lf_rgb):
+    from napari_lfdeblur._napari.reader import read_lightfield_layer
+
+    cp = [[0.0, 0.0, 0.3], [1.0, 0.0, -0.3]]
+    write_lightfield(tmp_path / "a.npy", lf_rgb, control_points=cp)
+    (_, kw, _), (_, path_kw, _) = read_lightfield_layer(tmp_path / "a.npy")
+    assert path_kw["metadata"]["view_shape"] == list(lf_rgb.shape[2:4])
+    np.save(tmp_path / "a.npy", lf_rgb[:, :, 1:])  # cropped by another program; its path file kept
+    with pytest.warns(UserWarning, match="the path is for"):
+        (_, kw, _), (_, path_kw, _) = read_lightfield_layer(tmp_path / "a.npy")
+    # the path layer says which views the path is for, so that taking it elsewhere warns again
+    assert path_kw["metadata"]["view_shape"] == list(lf_rgb.shape[2:4])
+    assert path_kw["metadata"]["lightfield_shape"][2] == lf_rgb.shape[2] - 1
+
+
 def test_reader_opens_the_light_field_when_its_path_is_unusable(tmp_path, lf_rgb):
     from napari_lfdeblur._napari.reader import read_lightfield_layer
 

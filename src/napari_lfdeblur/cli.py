@@ -405,7 +405,8 @@ def _run_deconvolve(args):
     sources = [(args.path_json or args.input, stated), (args.input, meta)]  # the path's fields, then the input's
     n_times = stated_value(args.n_times, "n_times", sources[:1], DEFAULT_N_TIMES)
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", sources, 0.0)
-    warn_view_mismatch("deconvolve", cp, blurred.shape, sources[0][0], stated)
+    if known is not None:  # (the reader has checked the path the input holds)
+        warn_view_mismatch("deconvolve", cp, blurred.shape, args.path_json, stated)
     options = dict(method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
                    couple_channels=not args.separate_channels, saturation=not args.no_saturation)
     gen = iter_deconvolve(blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device, **options)

@@ -93,7 +93,9 @@ def read_lightfield_layer(path, **options):
             n_times = int(meta.get("n_times") or 32)
             layers.append(path_layer_data(meta["control_points"], lf.shape, n_times=n_times, name=f"{name} path",
                                           infinity_disparity=meta.get("infinity_disparity"),
-                                          metadata={"source_layer": name}))
+                                          metadata={"source_layer": name,  # the views the file says it is for
+                                                    **({"view_shape": meta["view_shape"]} if "view_shape" in meta
+                                                       else {})}))
         except (TypeError, ValueError):
             pass  # not a path this package can draw: the light field alone, its metadata as the file said
     return layers

@@ -293,11 +293,15 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     that hold no path themselves. Its ``control_points`` (and the
     ``n_times`` and ``infinity_disparity`` it states) go to the top level,
     its name to ``path_file``. A file there that holds no valid path is
-    ignored with a warning: the light field is read all the same.
+    ignored with a warning: the light field is read all the same. A path
+    file that states views of another size than the light field's (it was
+    cropped, say) is read with a warning when the path has ``p_z`` or a
+    rotation (:func:`~napari_lfdeblur.path.path_view_mismatch`).
     """
     import json
 
-    from ..path import validate_control_points
+    from ..path import path_view_mismatch, validate_control_points
+    from ._write import check_path_field
 
     beside = path_json_beside(path)
     if not beside.is_file():
@@ -313,6 +317,14 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     for key in PATH_FIELDS:
         if isinstance(doc, dict) and key in doc and key not in metadata:
             metadata[key] = doc[key]
+    if metadata.get("view_shape") is not None:
+        try:
+            note = path_view_mismatch(cp, metadata["shape"], check_path_field("view_shape", metadata["view_shape"],
+                                                                              beside))
+        except ValueError as exc:
+            note = f"{exc}; the path was not checked against the views' size"
+        if note:
+            warnings.warn(f"{beside}: {note}", stacklevel=3)
 
 
 class ViewOrderWarning(UserWarning):
