@@ -350,8 +350,9 @@ class PathSource(Container):
     """Take a path from a layer holding one (*Take path*) or from a path JSON file.
 
     ``on_path(control_points, metadata)`` is called with the path found and
-    the metadata it came with: a layer's, or for a file the ``n_times`` and
-    ``infinity_disparity`` it states.
+    the metadata it came with: a layer's (with the ``view_shape`` of a light
+    field's own views when it states none), or for a file the ``n_times``,
+    ``infinity_disparity`` and ``view_shape`` it states.
     """
 
     def __init__(self, viewer, on_path, title: str = "lfdeblur"):
