@@ -840,7 +840,7 @@ def test_blind_deblur_says_where_it_runs_when_memory_is_short(monkeypatch):
     blurred = np.random.default_rng(0).random((3, 3, 16, 16), dtype=np.float32)
     monkeypatch.setattr(devices, "select_device", lambda device: torch.device("cuda"))
     monkeypatch.setattr(devices, "free_memory", lambda device: {"cuda": 1024, "cpu": None}[device.type])
-    monkeypatch.setattr(blind, "_run", lambda arr, d_inf, p, dev, seed, tile: iter([dev]))
+    monkeypatch.setattr(blind, "_run", lambda arr, d_inf, p, dev, seed, tile, windows: iter([dev]))
     with pytest.warns(RuntimeWarning, match="running on the CPU instead"):
         gen = iter_blind_deblur(blurred)
     assert next(gen) == torch.device("cpu")
@@ -1001,6 +1001,43 @@ def test_cli_deblur_on_a_tiny_npz(tmp_path, capsys, monkeypatch):
     assert seen[-1] == BlindParams.from_json(params.read_text()).replace(latent={"edge_anisotropy": 0.6})
     assert main(["deblur", str(src), str(tmp_path / "o4.npz"), "--edge-anisotropy", "nan"]) == 2
     assert "edge_anisotropy" in capsys.readouterr().err
+    # --window: where the path is estimated, recorded with the result; a bad one is a one-line error
+    seen_windows = []
+    monkeypatch.setattr(blind, "iter_blind_deblur", lambda *a, windows=None, **k: (seen_windows.append(windows),
+                                                                                   real(*a, windows=windows, **k))[1])
+    assert main(["deblur", str(src), str(tmp_path / "w.npz"), "--params", str(params), "--device", "cpu",
+                 "--window", "0,0,16,16"]) == 0
+    assert seen_windows[-1] == [(0, 0, 16, 16)]
+    assert read_lightfield_with_metadata(tmp_path / "w.npz")[1]["saved_metadata"]["path_windows"] == [[0, 0, 16, 16]]
+    with pytest.raises(SystemExit):  # argparse's one line
+        main(["deblur", str(src), str(tmp_path / "o5.npz"), "--window", "0,0,12"])
+    assert "expected Y0,X0,HEIGHT,WIDTH" in capsys.readouterr().err
+    assert main(["deblur", str(src), str(tmp_path / "o5.npz"), "--window", "8,0,16,16"]) == 2
+    assert "reaches outside the 16 x 16 views" in capsys.readouterr().err and not (tmp_path / "o5.npz").exists()
+
+
+def test_windows_name_where_the_path_is_estimated():
+    """Two halves blurred by different motions (as a subject that moved by itself): the path follows the window."""
+    sharp = _scene((7, 7, 40, 80))
+    paths = linear_path(2.0, angle_deg=0.0), linear_path(2.0, angle_deg=90.0)
+    halves = np.where(np.arange(80) < 40, *(simulate_blur(sharp, cp, n_times=32) for cp in paths))
+    blurred = np.clip(halves + np.random.default_rng(1).normal(0, 0.002, sharp.shape), 0, 1).astype(np.float32)
+    p = BlindParams().replace(n_control_points=2, require_evidence=False, final=None, path=FAST["path"])
+    for window, cp in zip(([(0, 0, 40, 40)], [(0, 40, 40, 40)]), paths):
+        res = blind_deblur(blurred, params=p, device="cpu", windows=window)
+        assert res.info["windows"] == window
+        est, true = _positions(res.control_points), _positions(cp)
+        d_est, d_true = est[-1, :2] - est[0, :2], true[-1, :2] - true[0, :2]
+        cos = abs(d_est @ d_true) / (np.linalg.norm(d_est) * np.linalg.norm(d_true))
+        assert cos > np.cos(np.radians(20)) and chamfer_distance(est, true) < 0.5  # that half's motion
+    # windows the solver cannot take: clear errors before any work
+    for bad, said in (([], "non-empty"), ([(0, 0, 40)], "non-empty list of"), ([(0, 0, 40.5, 40)], "whole numbers"),
+                      ([(0, 0, 8, 40)], "smaller than 16 x 16"), ([(0, 50, 40, 40)], "reaches outside the 40 x 80"),
+                      ([(-1, 0, 30, 30)], "reaches outside")):
+        with pytest.raises(ValueError, match=said):
+            blind_deblur(blurred, params=p, device="cpu", windows=bad)
+    with pytest.raises(ValueError, match="one window"):
+        blind_deblur(blurred, params=p.replace(motion="6dof"), windows=[(0, 0, 40, 40), (0, 40, 40, 40)])
 
 
 def test_solvers_never_leave_the_caller_without_grad(linear_case):

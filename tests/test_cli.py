@@ -316,7 +316,7 @@ def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, 
     _, src = lf_file
     seen = {}
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None):
         seen["params"] = params
         yield Progress("path", 1, 1, loss=1.0)
         cp = preset_path("shake6", 1.0, 0)
@@ -350,7 +350,7 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     rejected = linear_path(1.5, 30.0)
 
     # the evidence test says no
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None):
         yield Progress("path", 1, 1, loss=1.0)
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params,
                                  info={"blur_found": False, "message": "little blur found", "rejected_path": rejected})
@@ -393,7 +393,7 @@ def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_pa
 
     _, src = lf_file
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None):
         yield Progress("path", 1, 4, loss=0.125)
         yield Progress("path", 2, 4)  # inside a path-fit step: NaN loss
         yield Progress("path", 3, 4)
@@ -430,7 +430,7 @@ def test_deblur_options_reach_the_solver_and_are_checked(option, value, received
     _, src = lf_file
     seen = []
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None):
         seen.append(params.light_restoration if option == "--light-restoration" else max_memory)
         yield Progress("path", 1, 1, loss=1.0)
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params)

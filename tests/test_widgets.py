@@ -789,7 +789,7 @@ def test_blind_motion_choice_reaches_the_params_and_6dof_results_display(make_na
     cp6 = preset_path("shake6", 1.0, 0, rotation=0.01)[:4]
     seen = {}
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):
         seen["params"] = params
         yield Progress("path", 1, 2, loss=1.0, control_points=cp6)
         return blind_core.BlindResult(lf, cp6, loss_history=[1.0], params=params)
@@ -816,6 +816,43 @@ def test_blind_motion_choice_reaches_the_params_and_6dof_results_display(make_na
     assert notifications[-1][0] == "error" and "6-DOF motion needs the alternating method" in notifications[-1][1]
 
 
+def test_blind_windows_drawn_on_a_shapes_layer_reach_the_solver(make_napari_viewer, monkeypatch, lf, notifications):
+    import napari_lfdeblur.blind as blind_core
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+    from napari_lfdeblur.progress import Progress
+
+    seen = []
+
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):
+        seen.append(windows)
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params)
+
+    monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
+    viewer = make_napari_viewer()
+    layer, _ = _blind_layer(viewer, lf)
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    assert w.form.windows.value is None  # by default the solver chooses
+    marks = viewer.add_shapes(ndim=4, name="static part")  # drawn over the light field, at view (2, 3)
+    marks.add_rectangles(np.array([[2, 3, 1.2, 2.6], [2, 3, 1.2, 13.4], [2, 3, 10.4, 13.4], [2, 3, 10.4, 2.6]]))
+    # a path layer is not offered (its grey rectangle is the aperture), a Shapes layer is
+    offered = [c for c in w.form.windows.choices if c is not None]
+    assert offered == [marks] and w.form.windows.value is None
+    w.run_and_wait(timeout=60)
+    w.form.windows.value = marks
+    w.run_and_wait(timeout=60)
+    assert seen == [None, [(1, 3, 10, 11)]]  # rows 1..10, columns 3..13: the pixels the rectangle covers
+    assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["windows"] == [[1, 3, 10, 11]]
+    assert not notifications
+    # a shape off the views, or none at all: an error, and no run
+    marks.add_rectangles(np.array([[2, 3, 20, 20], [2, 3, 20, 30], [2, 3, 30, 30], [2, 3, 30, 20]]))
+    assert w.run() is None and "lies outside the 16 x 16 views" in notifications[-1][1]
+    marks.data = []
+    assert w.run() is None and "holds no shape" in notifications[-1][1]
+    assert len(seen) == 2
+
+
 def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch, lf, notifications):
     import napari_lfdeblur.blind as blind_core
     from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
@@ -823,7 +860,7 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
 
     seen = []
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):
         seen.append(params)
         yield Progress("path", 1, 1, loss=1.0)
         return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params)
@@ -887,7 +924,7 @@ def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_v
 
     rejected = np.array([[-0.6, 0.3, 0.1], [0.2, -0.4, 0.0], [0.4, 0.1, -0.1]])
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):  # the evidence test says no
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):  # the evidence test says no
         yield Progress("path", 1, 1, loss=1.0)
         return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params,
                                       info={"blur_found": False, "message": "little blur found",
@@ -914,7 +951,7 @@ def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_v
     d.path_source.take_button.clicked.emit()
     assert d.form.infinity_disparity.value == 0.5
     # with blur found nothing is rejected: no such layer
-    def fake_found(lf, *, infinity_disparity, params, device, seed):
+    def fake_found(lf, *, infinity_disparity, params, device, seed, windows=None):
         yield Progress("path", 1, 1, loss=1.0)
         return blind_core.BlindResult(lf, rejected, loss_history=[1.0], params=params, info={"blur_found": True})
 
@@ -938,7 +975,7 @@ def test_solver_steps_and_samples_run_on_one_torch_thread(make_napari_viewer, mo
     monkeypatch.setattr(_runner, "PREVIEW_SHARE", 0.0)
     seen = []
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):
         for i in range(3):
             seen.append(threading.current_thread())
             yield Progress("path", i, 3, loss=1.0, estimate=lambda: seen.append(threading.current_thread()) or lf)

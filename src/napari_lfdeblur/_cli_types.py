@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ["angular_crop", "fraction", "gib", "value_range"]
+__all__ = ["angular_crop", "fraction", "gib", "value_range", "window"]
 
 
 def angular_crop(text: str):
@@ -50,3 +50,14 @@ def value_range(text: str):
         return parse_value_range(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def window(text: str) -> tuple:
+    """``--window``: ``Y0,X0,H,W``, a window of the view in pixels (checked against the views by the solver)."""
+    try:
+        values = tuple(int(n) for n in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 4 or min(values) < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected Y0,X0,HEIGHT,WIDTH in pixels, such as 0,0,128,128")
+    return values

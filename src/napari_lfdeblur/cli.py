@@ -26,7 +26,7 @@ from ._cli_info import (
     stated_value,
     warn_view_mismatch,
 )
-from ._cli_types import angular_crop, fraction, gib, value_range
+from ._cli_types import angular_crop, fraction, gib, value_range, window
 
 __all__ = ["main"]
 
@@ -216,6 +216,10 @@ def _add_deblur(sub):
                         "restore with the estimated path scaled by FRACTION (in [0, 1]) instead of returning "
                         "the input: a light restoration (BlindParams.light_restoration; default: the preset's, "
                         "0.5 for 'default', 0 for 'paper'; 0: return the input)")
+    p.add_argument("--window", type=window, action="append", metavar="Y0,X0,H,W",
+                   help="estimate the path on this window of the view, in pixels (repeat for several; one with "
+                        "--motion 6dof); default: chosen from the data. Keeps the estimate off a subject that moved "
+                        "by itself; the whole light field is restored with the path found")
     p.add_argument("--path-out", help="also save the estimated path here (it always goes beside OUTPUT as NAME.path"
                    ".json, in a folder of views as path.json); a rejected path goes beside OUTPUT as NAME.path_"
                    "rejected.json, or with --path-out beside that file as *_rejected.json")
@@ -251,7 +255,7 @@ def _run_deblur(args):
     lf, meta = _read(args)
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", [(args.input, meta)], 0.0)
     gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=args.device, seed=args.seed,
-                            max_memory=args.max_memory)
+                            max_memory=args.max_memory, windows=args.window)
     bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
 
     def show(rec):
@@ -272,7 +276,8 @@ def _run_deblur(args):
     write_lightfield(out, result.lightfield, overwrite=args.overwrite, control_points=result.control_points,
                      metadata=result_metadata("deblurred (blind)", params.to_dict(), **fields, timings=result.timings,
                                               preset=None if args.params else args.preset,
-                                              final_weight=result.info.get("final_weight")))
+                                              final_weight=result.info.get("final_weight"),
+                                              path_windows=[list(w) for w in result.info.get("windows", [])]))
     fields["view_shape"] = list(lf.shape[2:4])  # the path files' only (the result's own shape says it)
     if extra_file is not None:
         save_path_json(extra_file, result.control_points, overwrite=True, **fields)

@@ -69,6 +69,7 @@ __all__ = [
     "lightfield_layer_data",
     "lightfield_metadata",
     "control_points_from_layer",
+    "windows_from_shapes",
     "path_scale",
     "path_layer_data",
     "epi_layer_data",
@@ -234,6 +235,35 @@ def control_points_from_layer(layer) -> np.ndarray:
         return validate_control_points(cp)
     except ValueError as exc:
         raise LayerError(f"layer {layer.name!r}: {exc}") from None
+
+
+def windows_from_shapes(shapes, image) -> list[tuple[int, int, int, int]]:
+    """The windows ``(y0, x0, height, width)`` of a light field's views that a Shapes layer marks.
+
+    Each shape (a rectangle, or any shape: its bounding box), drawn over the
+    light-field Image layer ``image`` at any view, gives the pixels its
+    ``(y, x)`` extent covers (vertices rounded to the nearest pixel centre,
+    both ends included), clipped to the view. The layers' scale and
+    translation are taken into account.
+
+    Raises
+    ------
+    LayerError
+        When the layer holds no shape, or a shape lies outside the view.
+    """
+    Y, X = image.data.shape[2:4]
+    if len(shapes.data) == 0:
+        raise LayerError(f"layer {shapes.name!r} holds no shape; draw a rectangle where the path is to be estimated")
+    windows = []
+    for verts in shapes.data:
+        world = np.asarray(verts)[:, -2:] * np.asarray(shapes.scale)[-2:] + np.asarray(shapes.translate)[-2:]
+        pix = (world - np.asarray(image.translate)[-2:]) / np.asarray(image.scale)[-2:]
+        (y0, x0), (y1, x1) = np.floor(pix.min(axis=0) + 0.5), np.floor(pix.max(axis=0) + 0.5) + 1
+        y0, x0, y1, x1 = int(max(y0, 0)), int(max(x0, 0)), int(min(y1, Y)), int(min(x1, X))
+        if y1 <= y0 or x1 <= x0:
+            raise LayerError(f"a shape of layer {shapes.name!r} lies outside the {Y} x {X} views of {image.name!r}")
+        windows.append((y0, x0, y1 - y0, x1 - x0))
+    return windows
 
 
 # ---------------------------------------------------------------- paths

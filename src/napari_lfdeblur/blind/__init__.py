@@ -102,13 +102,13 @@ from ..blur import validate_lightfield
 from ..path import bezier_positions, canonical_time_direction, center_path, path_in_frame
 from ..progress import Progress, run_to_completion
 from ._alternating import iter_alternating, relay
-from ._disparity import gray, shear
+from ._disparity import shear
 from ._evidence import evidence_message, iter_verdict
 from ._joint import iter_joint
 from ._memory import TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tiles, within
-from ._region import choose_regions
 from ._rotation import iter_rotation_fit
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams, RotationFitParams
+from ._windows import check_windows, path_windows, stage_preview
 
 #: why ``infinity_disparity='auto'`` is refused (docs/blind.md, "Where d_inf comes from")
 AUTO_MESSAGE = (
@@ -142,6 +142,7 @@ def blind_deblur(
     seed: int = 0,
     callback=None,
     max_memory: float | None = None,
+    windows=None,
     **overrides,
 ) -> BlindResult:
     """Estimate the camera path and the sharp light field of a motion-blurred light field.
@@ -173,6 +174,14 @@ def blind_deblur(
         the host's on the CPU), at most; the final stage runs in tiles to
         stay within it (by :func:`estimate_blind_memory`). Default: what the
         device has free.
+    windows : list of (y0, x0, height, width), optional
+        Where in the view the path is estimated (pixels; each window at
+        least 16 px a side, one window for ``motion='6dof'``). Default:
+        chosen from the data where the views are larger than
+        ``params.path.region`` px, else the whole view. Name them to keep
+        the estimate off a subject that moved by itself (its blur is not
+        the camera's); the whole light field is restored with the path
+        found there.
     **overrides
         Fields of :class:`BlindParams` to change, as in
         :meth:`BlindParams.replace` (e.g. ``n_control_points=3``,
@@ -189,14 +198,15 @@ def blind_deblur(
     ------
     ValueError
         On a malformed light field (wrong ndim, NaN, values reaching 2: not
-        on the [0, 1] scale), invalid parameter values or an
+        on the [0, 1] scale), invalid parameter values, an
         ``infinity_disparity`` that is not finite, beyond the views or
-        ``'auto'``.
+        ``'auto'``, or ``windows`` that are malformed, too small or reach
+        outside the views.
     TypeError
         On an unknown keyword or parameter of the wrong type.
     """
     gen = iter_blind_deblur(blurred, params=params, infinity_disparity=infinity_disparity, device=device,
-                            seed=seed, max_memory=max_memory, **overrides)
+                            seed=seed, max_memory=max_memory, windows=windows, **overrides)
     return run_to_completion(gen, callback)
 
 
@@ -208,6 +218,7 @@ def iter_blind_deblur(
     device="auto",
     seed: int = 0,
     max_memory: float | None = None,
+    windows=None,
     **overrides,
 ):
     """Blind deblurring as a generator: yields progress, returns a :class:`BlindResult`.
@@ -248,6 +259,7 @@ def iter_blind_deblur(
     p = _make_params(params, overrides)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be an integer; got {seed!r}")
+    windows = check_windows(windows, arr.shape, p)
     cap = check_max_memory(max_memory)
     asked = devices.select_device(device)
     need = estimate_blind_memory(arr.shape, p)
@@ -257,7 +269,8 @@ def iter_blind_deblur(
         warnings.warn(f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {asked} has free, even "
                       "in tiles: running on the CPU instead", RuntimeWarning, stacklevel=2)
     if tile is not None:
-        where = f"{p.path.region}x{p.path.region} windows" if p.path.region else "the whole view"
+        where = ("the windows given" if windows else f"{p.path.region}x{p.path.region} windows" if p.path.region
+                 else "the whole view")
         have = "max_memory" if cap is not None and available(dev) == cap else f"what {dev} has free"
         warnings.warn(
             f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {have}: restoring the light field in "
@@ -265,7 +278,7 @@ def iter_blind_deblur(
             RuntimeWarning,
             stacklevel=2,
         )
-    return devices.run_with_cpu_fallback(lambda d: _run(arr, d_inf, p, d, int(seed), tile), dev)
+    return devices.run_with_cpu_fallback(lambda d: _run(arr, d_inf, p, d, int(seed), tile, windows), dev)
 
 
 def _validate_input(blurred, infinity_disparity):
@@ -326,78 +339,20 @@ def _make_params(params, overrides) -> BlindParams:
     return params
 
 
-@torch.no_grad()
-def _preview(latents, fac: int, shape, unshear: float, offsets=((0, 0),)) -> np.ndarray:
-    """Path-stage latents (V, U, y, x, 1) at level ``fac`` as a light field of the input's ``shape``.
-
-    Nearest upsampling, the first latent placed at the first of ``offsets``
-    (the top-left pixel of the window the path is estimated on) and
-    edge-padded to the full size, the others pasted at theirs, the refocus
-    of the path stage undone when ``unshear`` is not 0, clipped to [0, 1]
-    and repeated over the colour channels: float32, ``shape``.
-    """
-    V, U, Y, X = shape[:4]
-    ups = []
-    for latent in latents:
-        lat = latent.detach()[..., 0]
-        if fac > 1:
-            lat = lat.repeat_interleave(fac, dim=2).repeat_interleave(fac, dim=3)
-        ups.append(lat)
-    lat = ups[0]
-    y, x = lat.shape[2:4]
-    if (y, x) != (Y, X):
-        oy, ox = offsets[0]
-        lat = torch.nn.functional.pad(lat.reshape(V * U, 1, y, x), (ox, X - x - ox, oy, Y - y - oy),
-                                      mode="replicate")
-        lat = lat.reshape(V, U, Y, X)
-        for other, (oy, ox) in zip(ups[1:], offsets[1:]):
-            h, w = other.shape[2:4]
-            lat[:, :, oy : oy + h, ox : ox + w] = other
-    if unshear != 0.0:
-        lat = shear(lat[..., None], -unshear)[..., 0]
-    out = lat.clamp(0.0, 1.0).to(device="cpu", dtype=torch.float32).numpy()
-    if len(shape) == 5:
-        out = np.repeat(out[..., None], shape[4], axis=-1)
-    return np.ascontiguousarray(out, dtype=np.float32)
-
-
-def _path_windows(arr, d_inf, p: BlindParams, dev, sheared):
-    """The grayscale light fields the path is estimated on, and their windows ``(y0, x0, h, w)`` in the view.
-
-    Refocused by ``d_inf`` when ``sheared`` (the path fit then uses the
-    ``d_inf = 0`` model); cut to :func:`~napari_lfdeblur.blind._region.choose_regions`'
-    windows (``p.path_windows()`` of them) when the views are larger than
-    ``p.path.region``.
-    """
-    Y, X = arr.shape[2:4]
-    f = torch.as_tensor(np.ascontiguousarray(arr), dtype=torch.float32, device=dev)
-    g = gray(f if arr.ndim == 5 else f.unsqueeze(-1)).contiguous()
-    del f
-    if sheared:
-        g = shear(g, d_inf)
-    if not p.path.region:
-        return [g], [(0, 0, Y, X)]
-    margin = math.ceil(abs(d_inf) * (max(arr.shape[:2]) - 1) / 2.0)  # refocused samples read beyond the edge
-    windows = choose_regions(g, p.path.region, p.path.disparity_weight, margin, p.path_windows())
-    if windows == [(0, 0, Y, X)]:
-        return [g], windows
-    return [g[:, :, y0 : y0 + h, x0 : x0 + w].contiguous() for y0, x0, h, w in windows], windows
-
-
-def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None):
+def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None, windows=None):
     t0 = time.perf_counter()
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     V, U, Y, X = arr.shape[:4]
     box = p.path_box(V, U)
     sheared = p.method == "alternating" and d_inf != 0.0
-    gs, windows = _path_windows(arr, d_inf, p, dev, sheared)  # the path is the same everywhere
+    gs, windows = path_windows(arr, d_inf, p, dev, sheared, windows)  # the path is the same everywhere
     g, window = gs[0], windows[0]
     # several windows: the path stage works in the frame's coordinates from the start
     frames = [(y0, x0, Y, X) for y0, x0, _, _ in windows] if len(windows) > 1 else None
 
     def preview(latent, fac):  # one latent, or one per window
-        return _preview(latent if isinstance(latent, list) else [latent], fac, arr.shape,
+        return stage_preview(latent if isinstance(latent, list) else [latent], fac, arr.shape,
                         d_inf if sheared else 0.0, [w[:2] for w in windows])
 
     if p.method == "alternating":

@@ -10,8 +10,10 @@ rotation: an ``(n, 6)`` path, plotted in a second panel),
 the evidence test finds little blur), ``light_restoration`` (the scale of
 the path of a light restoration then, made when two parts of the data
 agree on the path; 0: the input), ``device``, ``seed``,
-``infinity_disparity``, ``edge_anisotropy``, ``preview_every`` and an
-optional ``true_path`` layer. While it runs:
+``infinity_disparity``, ``edge_anisotropy``, ``preview_every``, an
+optional ``windows`` layer (a Shapes layer whose rectangles mark where the
+path is estimated: ``blind_deblur(windows=...)``) and an optional
+``true_path`` layer. While it runs:
 
 - a progress bar with the stage, iteration, loss and time left;
 - a live preview: the layer ``'<source> path (preview)'`` and the path plot
@@ -47,10 +49,12 @@ from ..layers import (
     LayerError,
     add_layer,
     control_points_from_layer,
+    layer_kind,
     lightfield_layer_data,
     lightfield_metadata,
     path_layer_data,
     remove_layer,
+    windows_from_shapes,
 )
 from ._controls import (
     INFINITY_DISPARITY_TIP,
@@ -152,9 +156,19 @@ def _fields(viewer) -> list:
               "(0: the same; see docs/blind.md)"),
         spin("preview_every", 10, 0, 1000, label="preview every", tooltip="preview the light field every "
              "N progress records (0: none); the path is previewed at every record"),
+        LayerChoice(viewer, predicate=_marks_windows, nullable=True, name="windows", label="estimate path in",
+                    tooltip="optional: a Shapes layer whose rectangles (drawn over the light field, at any view) "
+                    "mark where the camera path is estimated; none: chosen from the data. Keep them off a subject "
+                    "that moved by itself: its blur is not the camera's. The whole light field is restored"),
         LayerChoice(viewer, predicate=has_path, nullable=True, name="true_path", label="true path (optional)",
                     tooltip="a layer holding the true path, to plot for comparison"),
     ]
+
+
+def _marks_windows(layer) -> bool:
+    """Whether ``layer`` may mark the path's windows: a Shapes layer that is not a path layer (whose grey
+    rectangle is the aperture)."""
+    return layer_kind(layer) == "shapes" and not has_path(layer)
 
 
 class BlindDeblurWidget(SolverWidget):
@@ -248,8 +262,11 @@ class BlindDeblurWidget(SolverWidget):
                               light_restoration=f.light_restoration.value)
         settings = {"preset": f.preset.value, "device": f.device.value, "seed": f.seed.value,
                     "infinity_disparity": f.infinity_disparity.value}
+        windows = None if f.windows.value is None else windows_from_shapes(f.windows.value, layer)
+        if windows is not None:
+            settings["windows"] = [list(w) for w in windows]
         gen = iter_blind_deblur(lf, infinity_disparity=settings["infinity_disparity"], params=params,
-                                device=settings["device"], seed=settings["seed"])
+                                device=settings["device"], seed=settings["seed"], windows=windows)
         self._job = {"source": layer.name, "shape": lf.shape, "true": self.true_path(),
                      "n_times": params.n_times, "settings": settings}
         self.loss_plot.reset()
