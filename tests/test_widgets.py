@@ -816,19 +816,27 @@ def test_blind_motion_choice_reaches_the_params_and_6dof_results_display(make_na
     assert notifications[-1][0] == "error" and "6-DOF motion needs the alternating method" in notifications[-1][1]
 
 
-def test_blind_windows_drawn_on_a_shapes_layer_reach_the_solver(make_napari_viewer, monkeypatch, lf, notifications):
+def _fake_blind_solver(monkeypatch) -> list:
+    """Replace the blind solver by one that returns its input with a zero path; the keyword arguments of
+    each call go to the list returned."""
     import napari_lfdeblur.blind as blind_core
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
     from napari_lfdeblur.progress import Progress
 
     seen = []
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):
-        seen.append(windows)
+    def fake_iter_blind_deblur(lf, **kwargs):
+        seen.append(kwargs)
         yield Progress("path", 1, 1, loss=1.0)
-        return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params)
+        return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=kwargs["params"])
 
     monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
+    return seen
+
+
+def test_blind_windows_drawn_on_a_shapes_layer_reach_the_solver(make_napari_viewer, monkeypatch, lf, notifications):
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+
+    seen = _fake_blind_solver(monkeypatch)
     viewer = make_napari_viewer()
     layer, _ = _blind_layer(viewer, lf)
     w = _dock(viewer, BlindDeblurWidget(viewer))
@@ -842,7 +850,7 @@ def test_blind_windows_drawn_on_a_shapes_layer_reach_the_solver(make_napari_view
     w.run_and_wait(timeout=60)
     w.form.windows.value = marks
     w.run_and_wait(timeout=60)
-    assert seen == [None, [(1, 3, 10, 11)]]  # rows 1..10, columns 3..13: the pixels the rectangle covers
+    assert [k["windows"] for k in seen] == [None, [(1, 3, 10, 11)]]  # rows 1..10, columns 3..13: the pixels the rectangle covers
     assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["windows"] == [[1, 3, 10, 11]]
     assert not notifications
     # a shape off the views, or none at all: an error, and no run
@@ -854,18 +862,9 @@ def test_blind_windows_drawn_on_a_shapes_layer_reach_the_solver(make_napari_view
 
 
 def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch, lf, notifications):
-    import napari_lfdeblur.blind as blind_core
     from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
-    from napari_lfdeblur.progress import Progress
 
-    seen = []
-
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):
-        seen.append(params)
-        yield Progress("path", 1, 1, loss=1.0)
-        return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params)
-
-    monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
+    calls = _fake_blind_solver(monkeypatch)
     viewer = make_napari_viewer()
     layer, _ = _blind_layer(viewer, lf)
     w = _dock(viewer, BlindDeblurWidget(viewer))
@@ -874,7 +873,7 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     w.run_and_wait(timeout=60)
     w.form.restore_anyway.value = True
     w.run_and_wait(timeout=60)
-    assert [p.require_evidence for p in seen] == [True, False]
+    assert [k["params"].require_evidence for k in calls] == [True, False]
     assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["require_evidence"] is False
     assert w.form.light_restoration.value == 0.5  # the default preset's light restoration
     assert not w.form.light_restoration.enabled  # moot while restoring anyway
@@ -882,7 +881,8 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     assert w.form.light_restoration.enabled
     w.form.light_restoration.value = 0.25
     w.run_and_wait(timeout=60)
-    assert [p.light_restoration for p in seen] == [0.5, 0.5, 0.25] and seen[-1].require_evidence is True
+    assert [k["params"].light_restoration for k in calls] == [0.5, 0.5, 0.25]
+    assert calls[-1]["params"].require_evidence is True
     assert viewer.layers["b deblurred (blind)"].metadata["parameters"]["light_restoration"] == 0.25
     w.form.restore_anyway.value = True
     w.form.preset.value = "paper"  # choosing a preset shows its own setting again
