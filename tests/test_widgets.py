@@ -407,6 +407,7 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     assert meta["loss_history"] == [float(v) for v in res.loss_history]
     assert meta.get("final_weight") == res.info.get("final_weight")  # None only when the input was returned
     assert ("final_weight" in meta) == (res.info["restoration"] != "none")
+    assert meta["path_windows"] == [[0, 0, *SHAPE[2:4]]]  # a small view: the path is estimated on all of it
     path = viewer.layers["b estimated path"]
     # the true path is shown in the estimate's gauge (linear_path is centred; maybe time-reversed)
     true_shown = np.asarray(path.metadata["true_control_points"])

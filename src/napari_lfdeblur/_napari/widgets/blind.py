@@ -31,7 +31,8 @@ within the current iteration), removes the preview layers and adds nothing.
 When it finishes, the previews are replaced by
 ``'<source> deblurred (blind)'`` (metadata: parameters, path, loss history,
 timings, package version, the verdict of the evidence test in
-``blur_evidence`` and the final stage's weight in ``final_weight``) and ``'<source> estimated path'``. When the data show
+``blur_evidence``, the final stage's weight in ``final_weight`` and the
+windows the path was estimated on in ``path_windows``) and ``'<source> estimated path'``. When the data show
 little blur, the result is a light restoration or the input with a zero
 path (unless *restore anyway* is ticked), and a notification says why
 (:attr:`napari_lfdeblur.blind.BlindResult.info`).
@@ -334,6 +335,8 @@ class BlindDeblurWidget(SolverWidget):
             meta["blur_evidence"] = result.info["message"]
         if (getattr(result, "info", None) or {}).get("final_weight") is not None:
             meta["final_weight"] = result.info["final_weight"]  # the final stage's weight (the noise rule's choice)
+        if (getattr(result, "info", None) or {}).get("windows"):  # where the path was estimated, as the CLI records
+            meta["path_windows"] = [list(w) for w in result.info["windows"]]
         path_name = f"{job['source']} estimated path"
         self._adopt_previews(name, path_name)
         out = add_layer(self.viewer, lightfield_layer_data(result.lightfield, name=name, metadata=meta))
