@@ -108,6 +108,7 @@ def test_deblur_equals_the_serial_api_bit_for_bit(client, tmp_path):
         assert rec["blur_found"] is want.info["blur_found"] and rec["restoration"] == want.info["restoration"]
         doc = json.loads((tmp_path / "out" / f"{p.stem}.path.json").read_text())
         assert doc["blur_evidence"] == want.info["message"] and doc["view_shape"] == [16, 16]
+        assert doc["path_windows"] == [list(w) for w in want.info["windows"]]
         assert doc.get("final_weight") == want.info.get("final_weight")
         if "rejected_path" in want.info:
             np.testing.assert_array_equal(doc["rejected_control_points"], want.info["rejected_path"])

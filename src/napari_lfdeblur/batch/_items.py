@@ -188,6 +188,7 @@ def _deblur(lf, spec: dict, device, meta: dict):
         extra["blur_evidence"] = info["message"]
     if info.get("final_weight") is not None:  # the final stage's weight: passed to deconvolve, it gives the output
         extra["final_weight"] = info["final_weight"]
+    extra["path_windows"] = [list(w) for w in info.get("windows", [])]  # where the path was estimated
     if "rejected_path" in info:  # the output is the input or a light restoration: keep the path, to restore with it
         extra["rejected_control_points"] = np.asarray(info["rejected_path"]).tolist()
     return result.lightfield, result.control_points, extra
