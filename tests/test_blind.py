@@ -1031,7 +1031,7 @@ def test_windows_name_where_the_path_is_estimated():
         cos = abs(d_est @ d_true) / (np.linalg.norm(d_est) * np.linalg.norm(d_true))
         assert cos > np.cos(np.radians(20)) and chamfer_distance(est, true) < 0.5  # that half's motion
     # windows the solver cannot take: clear errors before any work
-    for bad, said in (([], "non-empty"), ([(0, 0, 40)], "non-empty list of"), ([(0, 0, 40.5, 40)], "whole numbers"),
+    for bad, said in (([], "non-empty"), ([(0, 0, 40)], "non-empty list of"), ([(0, 0, 40.5, 40)], "whole numbers"), ((0, 0, 40, 40), "a list of"),
                       ([(0, 0, 8, 40)], "smaller than 16 x 16"), ([(0, 50, 40, 40)], "reaches outside the 40 x 80"),
                       ([(-1, 0, 30, 30)], "reaches outside")):
         with pytest.raises(ValueError, match=said):

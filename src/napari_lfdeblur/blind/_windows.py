@@ -55,7 +55,7 @@ def check_windows(windows, shape, p: BlindParams):
                              f"{MIN_WINDOW} px: too little to estimate a camera motion on")
         if y0 < 0 or x0 < 0 or y0 + h > Y or x0 + w > X:
             raise ValueError(f"window {(y0, x0, h, w)} (y0, x0, height, width) reaches outside the {Y} x {X} views")
-    if len(out) > p.path_windows() and p.path_windows() == 1:
+    if len(out) > 1 and p.path_windows() == 1:
         raise ValueError(f"motion={p.motion!r} with method={p.method!r} estimates the path on one window; got "
                          f"{len(out)}")
     return out
