@@ -62,7 +62,8 @@ def test_a_path_for_views_of_another_size_is_warned_about(lf_file, tmp_path, cap
     assert main(["deconvolve", str(tmp_path / "b_own.npz"), str(tmp_path / "other.json"), str(tmp_path / "d2.npz"),
                  *args]) == 0
     err = capsys.readouterr().err
-    assert "lfdeblur deconvolve: warning: the path is for 20x12 views and these are 12x12" in err
+    said = f"lfdeblur deconvolve: warning: {tmp_path / 'other.json'}: the path is for 20x12 views and these are 12x12"
+    assert said in err
     assert "path_in_window" in err and (tmp_path / "d2.npz").exists()
     # an input cropped by another program, its path file kept: said once (by the reader), and it runs
     np.save(tmp_path / "c.npy", read_lightfield(tmp_path / "b_own.npz")[:, :, 2:])

@@ -49,19 +49,10 @@ def stated_value(given, key: str, sources, default):
 
 def warn_view_mismatch(command: str, cp, shape, name, fields) -> None:
     """Say on stderr when the path ``cp`` from ``name`` (whose ``fields`` may state its ``view_shape``) is for
-    views of another size than those of a light field of ``shape`` (:func:`~napari_lfdeblur.path.path_view_mismatch`).
+    views of another size than those of a light field of ``shape`` (``io._write.view_shape_note``)."""
+    from .io._write import view_shape_note
 
-    An unusable stated ``view_shape`` is said too, and nothing is compared.
-    """
-    from .io._write import check_path_field
-    from .path import path_view_mismatch
-
-    if fields.get("view_shape") is None:
-        return
-    try:
-        note = path_view_mismatch(cp, shape, check_path_field("view_shape", fields["view_shape"], name))
-    except ValueError as exc:
-        note = f"{exc}; the path was not checked against the views' size"
+    note = view_shape_note(cp, shape, fields, name)
     if note:
         print(f"lfdeblur {command}: warning: {note}", file=sys.stderr)
 

@@ -300,8 +300,8 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     """
     import json
 
-    from ..path import path_view_mismatch, validate_control_points
-    from ._write import check_path_field
+    from ..path import validate_control_points
+    from ._write import view_shape_note
 
     beside = path_json_beside(path)
     if not beside.is_file():
@@ -317,14 +317,9 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     for key in PATH_FIELDS:
         if isinstance(doc, dict) and key in doc and key not in metadata:
             metadata[key] = doc[key]
-    if metadata.get("view_shape") is not None:
-        try:
-            note = path_view_mismatch(cp, metadata["shape"], check_path_field("view_shape", metadata["view_shape"],
-                                                                              beside))
-        except ValueError as exc:
-            note = f"{exc}; the path was not checked against the views' size"
-        if note:
-            warnings.warn(f"{beside}: {note}", stacklevel=3)
+    note = view_shape_note(cp, metadata["shape"], doc if isinstance(doc, dict) else {}, beside)
+    if note:
+        warnings.warn(note, stacklevel=3)
 
 
 class ViewOrderWarning(UserWarning):

@@ -219,6 +219,25 @@ def check_path_field(key: str, value, source: str):
     return int(value) if key == "n_times" else float(value)
 
 
+def view_shape_note(control_points, shape, fields: dict, source) -> str | None:
+    """What to tell someone who applies the path ``control_points`` from ``source`` (whose ``fields`` may state
+    its ``view_shape``) to a light field of ``shape``, or None.
+
+    :func:`~napari_lfdeblur.path.path_view_mismatch`, after ``source``; or, for a ``view_shape`` that
+    :func:`check_path_field` refuses, that the path was not checked.
+    """
+    from ..path import path_view_mismatch
+
+    if fields.get("view_shape") is None:
+        return None
+    try:
+        stated = check_path_field("view_shape", fields["view_shape"], source)
+    except ValueError as exc:
+        return f"{exc}; the path was not checked against the views' size"
+    note = path_view_mismatch(control_points, shape, stated)
+    return None if note is None else f"{source}: {note}"
+
+
 def _path_fields(meta: dict) -> dict:
     """The fields of the path JSON written with a light field of metadata ``meta``: its views' size too."""
     return {**{k: meta[k] for k in PATH_FIELDS if k in meta}, "view_shape": list(meta["shape"][2:4])}
