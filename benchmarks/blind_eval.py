@@ -20,7 +20,9 @@ Methods
 
 Metrics (``napari_lfdeblur.metrics``), spatial borders of ``CROP`` px removed: PSNR and its gain
 over the blurred input, SSIM, angular error, and for path estimates the blur mismatch, Chamfer
-distance and relative RMSE. Time is the wall-clock time of the method call; peak memory the peak
+distance and relative RMSE. Each case's *blur length* (``eval_set.blur_length``: how far the true blur
+moves the scene, px) groups the cases a second time, beside the blur lengths of the paths estimated
+and restored with. Time is the wall-clock time of the method call; peak memory the peak
 resident set size above the level before the call (sampled every 10 ms), or
 ``torch.cuda.max_memory_allocated`` on a GPU.
 
@@ -79,6 +81,12 @@ class Case:
     sharp: np.ndarray  # ground truth, zero-mean gauge
     blurred: np.ndarray
     control_points: np.ndarray  # true path, zero-mean gauge for RENDER_TIMES
+    disparity: np.ndarray  # (Y, X) of the centre view: eval_set.scene_disparity
+    blur_px: float  # eval_set.blur_length of the true path
+
+    def blur_px_of(self, cp) -> float:
+        """eval_set.blur_length of a path on this case's scene."""
+        return eval_set.blur_length(cp, self.sharp, self.disparity, self.infinity_disparity)
 
     @property
     def name(self) -> str:
@@ -110,7 +118,9 @@ def make_case(spec: eval_set.CaseSpec, quick: bool = False) -> Case:
     """Render a case: its sharp light field, true path and blurred, noisy input."""
     sharp = eval_set.sharp_lightfield(spec, quick)
     cp = eval_set.true_path(spec)
-    return Case(spec, sharp, eval_set.blurred_lightfield(spec, sharp, cp), cp)
+    disparity = eval_set.scene_disparity(spec, sharp)
+    return Case(spec, sharp, eval_set.blurred_lightfield(spec, sharp, cp), cp, disparity,
+                eval_set.blur_length(cp, sharp, disparity, spec.infinity_disparity))
 
 
 def path_spread(cp, n_times: int = 128) -> float:
@@ -257,13 +267,17 @@ def run_method(method: str, case: Case, device: str, quick: bool):
     extra = getattr(res, "info", None)
     if isinstance(extra, dict):
         info["info"] = {k: v for k, v in extra.items() if isinstance(v, (int, float, str, bool))}
+        # the path estimated, also where the evidence test returned the input or restored lightly
+        info["estimate"] = extra.get("rejected_path")
+    if info.get("estimate") is None:
+        info["estimate"] = res.control_points
     return np.asarray(res.lightfield), np.asarray(res.control_points), info
 
 
 def _case_fields(case: Case) -> dict:
     s = case.spec
     return {"case": s.name, "group": s.group, "d_inf": s.infinity_disparity, "extent": s.extent,
-            "z_ratio": s.z_ratio, "noise": s.noise}
+            "z_ratio": s.z_ratio, "noise": s.noise, "blur_px": case.blur_px}
 
 
 def evaluate(case: Case, method: str, device: str, quick: bool) -> dict:
@@ -273,6 +287,7 @@ def evaluate(case: Case, method: str, device: str, quick: bool) -> dict:
         t0 = time.perf_counter()
         restored, cp, info = run_method(method, case, device, quick)
         seconds = time.perf_counter() - t0
+    estimate = info.pop("estimate", None)
     crop = 2 if quick else CROP
     row = {
         **_case_fields(case),
@@ -290,6 +305,7 @@ def evaluate(case: Case, method: str, device: str, quick: bool) -> dict:
         # no true blur: the mismatch is undefined (NaN); the estimate's extent says how much blur was found
         row.update(blur_mismatch=err.blur_mismatch, chamfer=err.chamfer, rmse_relative=err.rmse_relative,
                    found_extent=path_error(cp, np.zeros((2, 3)), n_times=PATH_TIMES).chamfer,
+                   restored_blur_px=case.blur_px_of(cp), estimate_blur_px=case.blur_px_of(estimate),
                    control_points=np.asarray(cp).tolist())
     return row
 
@@ -311,6 +327,7 @@ def input_row(case: Case, quick: bool) -> dict:
         "blur_mismatch": err.blur_mismatch,
         "chamfer": err.chamfer,
         "rmse_relative": err.rmse_relative,
+        "restored_blur_px": 0.0,
         "reference_sigma": estimate_noise_sigma(case.sharp),  # the ground truth's finest detail
     }
 
@@ -342,11 +359,26 @@ SUMMARY_GROUPS = {
 }
 
 
-def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
-    """Per summary group and method: means over the cases it ran on, the worst gain, the slowest time."""
+#: blur-length groups (``eval_set.blur_length`` of the true path, px): label -> which rows
+BLUR_GROUPS = {
+    "no blur or < 1 px": lambda r: r.get("blur_px", math.nan) < 1.0,
+    "1 to 2 px": lambda r: 1.0 <= r.get("blur_px", math.nan) < 2.0,
+    "≥ 2 px": lambda r: r.get("blur_px", math.nan) >= 2.0,
+}
+
+
+def _length_ratio(rows, key: str = "restored_blur_px") -> float | None:
+    """Median over the blurred cases of a path's blur length (``key``) over the true path's."""
+    ratios = [r[key] / r["blur_px"] for r in rows if r.get("blur_px", 0) > 0 and r.get(key) is not None]
+    return float(np.median(ratios)) if ratios else None
+
+
+def summarise(rows: list[dict], methods: list[str], groups=None) -> list[dict]:
+    """Per group (``SUMMARY_GROUPS`` unless given) and method: means over the cases it ran on, the worst
+    gain, the slowest time, the median blur-length ratio."""
     out = []
     blurred = {r["case"]: r.get("psnr") for r in rows if r["method"] == INPUT}
-    for label, keep in SUMMARY_GROUPS.items():
+    for label, keep in (groups or SUMMARY_GROUPS).items():
         for method in methods:
             sel = [r for r in rows if r["method"] == method and "error" not in r and keep(r)]
             if not sel:
@@ -360,6 +392,7 @@ def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
                                                "peak_mib")},
                 "worst_gain": worst[0], "worst_case": worst[1],
                 "seconds_max": max(_finite(sel, "seconds"), default=None),
+                "length_ratio": _length_ratio(sel), "estimate_ratio": _length_ratio(sel, "estimate_blur_px"),
             })
     return out
 
@@ -377,28 +410,45 @@ def _summary_table(means: list[dict]) -> list[str]:
     return out
 
 
+def _blur_table(means: list[dict]) -> list[str]:
+    head = ("| true blur length | method | cases | blurred PSNR dB | gain dB | worst gain dB (case) | blur mismatch "
+            "| blur length / true (median): restored with | estimated |")
+    out = [head, "|" + "---|" * (head.count("|") - 1)]
+    for m in means:
+        worst = _fmt(m["worst_gain"], "+.2f") + (f" ({m['worst_case']})" if m["worst_case"] else "")
+        out.append(f"| {m['group']} | {m['method']} | {m['n']} | {_fmt(m['blurred_psnr'], '.2f')} "
+                   f"| {_fmt(m['gain'], '+.2f')} | {worst} | {_fmt(m['blur_mismatch'], '.3f')} "
+                   f"| {_fmt(m['length_ratio'], '.2f')} | {_fmt(m['estimate_ratio'], '.2f')} |")
+    return out
+
+
 def _case_table(rows: list[dict]) -> list[str]:
     head = ("| case | group | d_inf | extent | noise | method | PSNR dB | gain dB | SSIM | angular err "
-            "| blur mismatch | Chamfer (views) | time s | peak MiB |")
+            "| blur mismatch | Chamfer (views) | blur length px (restored / estimated / true) | time s | peak MiB |")
     out = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in rows:
         out.append("| " + " | ".join([
             r["case"], r.get("group", ""), _fmt(r.get("d_inf"), "+g"), _fmt(r.get("extent"), ".2f"),
             _fmt(r.get("noise"), "g"), r["method"], _fmt(r.get("psnr"), ".2f"), _fmt(r.get("gain"), "+.2f"),
             _fmt(r.get("ssim"), ".4f"), _fmt(r.get("angular"), ".5f"), _fmt(r.get("blur_mismatch"), ".3f"),
-            _fmt(r.get("chamfer"), ".3f"), _fmt(r.get("seconds"), ".1f"), _fmt(r.get("peak_mib"), ".0f"),
+            _fmt(r.get("chamfer"), ".3f"),
+            f"{_fmt(r.get('restored_blur_px'), '.2f')} / {_fmt(r.get('estimate_blur_px'), '.2f')} / "
+            f"{_fmt(r.get('blur_px'), '.2f')}",
+            _fmt(r.get("seconds"), ".1f"), _fmt(r.get("peak_mib"), ".0f"),
         ]) + " |")
     return out
 
 
 def _cases_table(specs, rows) -> list[str]:
     ref = {r["case"]: r.get("reference_sigma") for r in rows if r["method"] == INPUT}
-    out = ["| case | group | scene | d_inf | path extent (views) | z ratio | control points | noise σ "
-           "| σ estimated in the ground truth |",
-           "|---|---|---|---|---|---|---|---|---|"]
+    blur = {r["case"]: r.get("blur_px") for r in rows if r["method"] == INPUT}
+    out = ["| case | group | scene | d_inf | path extent (views) | z ratio | control points | blur length px "
+           "| noise σ | σ estimated in the ground truth |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
     for s in specs:
         out.append(f"| {s.name} | {s.group} | {eval_set.describe(s)} | {s.infinity_disparity:+g} | {s.extent:.2f} "
-                   f"| {s.z_ratio:.2f} | {s.n_points} | {s.noise:g} | {_fmt(ref.get(s.name), '.4f')} |")
+                   f"| {s.z_ratio:.2f} | {s.n_points} | {_fmt(blur.get(s.name), '.2f')} | {s.noise:g} "
+                   f"| {_fmt(ref.get(s.name), '.4f')} |")
     return out
 
 
@@ -453,6 +503,15 @@ def split_line(split: str, frozen: bool) -> str:
             "held-out report.")
 
 
+BLUR_TEXT = """\
+The cases grouped by how far their true blur moves the scene (*blur length*: the length of the straight,
+uniform motion with the same RMS image motion, on the textured pixels of the centre view; see *How the
+figures are made*). The last two columns compare blur lengths with the true one (1 is right, above 1 too
+long; the median over the group's blurred cases): of the path each method restored with (0 where it returned
+the input; the light restoration's path is the estimate scaled down), and of the path it estimated, whatever
+the evidence test then decided."""
+
+
 METHOD_TEXT = """\
 ## How the figures are made
 
@@ -484,6 +543,12 @@ METHOD_TEXT = """\
   `||B(l, p_est) - B(l, p_true)|| / ||B(l, p_true) - l||` on the ground truth with the case's
   `d_inf` (0 is perfect, 1 is as bad as "no motion"; undefined without blur); **Chamfer** distance
   between the two sets of positions, in views. The input row is "no motion" (the zero path).
+- **Blur length** (`eval_set.blur_length`): a point at disparity `d` moves by `(d - d_inf) s` px
+  when the camera moves by `s` views, `s = (p_x - x~ p_z, p_y - y~ p_z)` at its pixel. Its RMS motion
+  over the exposure, averaged (root mean square) over the centre view's pixels weighted by the
+  squared gradient of its grayscale (a flat region's motion does not show), times √12: a straight
+  uniform motion of length `L` has RMS `L / √12`. Disparities: the renderer's map for rendered
+  scenes; for the captures, estimated from the views (the shear that makes them agree best).
 - **Fine detail in the ground truth.** The last column of the case list applies the noise estimate
   behind the default TV weight (`napari_lfdeblur.deconvolution.estimate_noise_sigma`) to the sharp
   light field itself: it measures the finest-scale detail there, which is sensor noise in a real
@@ -505,6 +570,8 @@ def render(rows, means, specs, skipped, args, env) -> str:
         lines += ["**Quick smoke run at tiny sizes: not the benchmark.**", ""]
     lines += ["## Summary", "", "Means over the cases of each group; gains are over the blurred input.", "",
               *_summary_table(means), "", "## Targets (CPU)", "", *targets(means, args.quick), ""]
+    methods = list(dict.fromkeys(m["method"] for m in means))
+    lines += ["## By blur length", "", BLUR_TEXT, "", *_blur_table(summarise(rows, methods, BLUR_GROUPS)), ""]
     notes = [f"- `{m}`: skipped, {why}" for m, why in skipped.items()]
     notes += [f"- `{m}`: not run (not in `--methods`)." for m in ALL_METHODS if m not in args.method_list]
     notes += [f"- {note}" for note in args.note]

@@ -211,6 +211,49 @@ def blurred_lightfield(spec: CaseSpec, sharp: np.ndarray, cp: np.ndarray) -> np.
     return np.clip(blurred + rng.normal(0.0, spec.noise, blurred.shape), 0.0, 1.0).astype(np.float32)
 
 
+def scene_disparity(spec: CaseSpec, sharp: np.ndarray) -> np.ndarray:
+    """Disparity (px/view) of the centre view of a case's sharp light field, ``(Y, X)`` float32.
+
+    Rendered scenes: the renderer's own map (exact). Captures: estimated from the views (the shear
+    that makes them agree best; ``napari_lfdeblur.blind._disparity.disparity_map``), reliable where
+    there is texture, which is where a blur shows.
+    """
+    import torch
+
+    from napari_lfdeblur import procedural_scene
+    from napari_lfdeblur.blind._disparity import disparity_map, gray
+
+    if spec.group == "rendered":
+        return procedural_scene(sharp.shape[:4], seed=spec.scene[1], infinity_disparity=spec.infinity_disparity)[1]
+    return disparity_map(gray(torch.as_tensor(sharp)))
+
+
+def blur_length(cp, sharp: np.ndarray, disparity: np.ndarray, infinity_disparity: float) -> float:
+    """How far the blur of path ``cp`` moves the scene, in px: the length of the equivalent straight blur.
+
+    A point at disparity ``d`` moves by ``(d - d_inf) s`` px when the camera moves by ``s`` views,
+    with ``s = (p_x - x~ p_z, p_y - y~ p_z)`` at its pixel (the forward model). Its RMS motion over
+    the exposure is averaged (root mean square) over the centre view's pixels, weighted by the squared
+    gradient of its grayscale (the motion of a flat region does not show), and multiplied by
+    ``sqrt(12)``: a uniform motion along a straight line of length ``L`` has RMS ``L / sqrt(12)``.
+    0 for no blur. Rotation columns, if any, are not counted.
+    """
+    from napari_lfdeblur import bezier_positions
+
+    pos = bezier_positions(np.asarray(cp, dtype=np.float64)[:, :3], RENDER_TIMES)
+    Y, X = disparity.shape
+    R = max(Y, X) / 2
+    xt, yt = (np.arange(X) - (X - 1) / 2) / R, (np.arange(Y) - (Y - 1) / 2) / R
+    s_u = pos[:, 0, None] - pos[:, 2, None] * xt[None]  # (T, X)
+    s_v = pos[:, 1, None] - pos[:, 2, None] * yt[None]  # (T, Y)
+    spread = s_v.var(axis=0)[:, None] + s_u.var(axis=0)[None, :]  # (Y, X), views^2
+    centre = sharp[sharp.shape[0] // 2, sharp.shape[1] // 2].astype(np.float64)
+    gy, gx = np.gradient(centre.mean(axis=-1) if centre.ndim == 3 else centre)
+    w = gy * gy + gx * gx
+    rel = disparity.astype(np.float64) - infinity_disparity
+    return float(np.sqrt(12.0 * (w * rel * rel * spread).sum() / max(w.sum(), 1e-30)))
+
+
 def describe(spec: CaseSpec) -> str:
     """The scene of a case in words: ``seed 1500103`` or ``crop y 64, x 120``."""
     return f"seed {spec.scene[1]}" if spec.scene[0] == "seed" else f"crop y {spec.scene[1]}, x {spec.scene[2]}"

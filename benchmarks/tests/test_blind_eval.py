@@ -32,7 +32,7 @@ def test_quick_run_writes_a_table(blind_eval, tmp_path):
                             "--json", str(js)]) == 0
     text = out.read_text()
     assert "Quick smoke run" in text and "Development split" in text
-    assert "| dev04 | rendered | +0 |" in text and "| truepath |" in text
+    assert "| dev04 | rendered | +0 |" in text and "| truepath |" in text and "## By blur length" in text
     data = json.loads(js.read_text())
     rows = data["rows"]
     inp = next(r for r in rows if r["method"] == "input (blurred)")
@@ -149,6 +149,48 @@ def test_summary_by_group_skips_failures_and_nan(blind_eval):
     assert means["all"]["blurred_psnr"] == pytest.approx(29.0) and means["all"]["blur_mismatch"] is None
     assert means["all"]["worst_gain"] == 1.0 and means["all"]["worst_case"] == "b"
     assert means["d_inf = 0"]["psnr"] == pytest.approx(30.0) and means["F01"]["n"] == 1
+
+
+def test_blur_length_of_a_straight_uniform_motion_is_its_image_length(blind_eval):
+    es = blind_eval.eval_set
+    rng = np.random.default_rng(0)
+    sharp = rng.random((3, 3, 24, 32, 3)).astype(np.float32)
+    # a straight motion of 2 views along x, at constant speed (a linear Bezier path), no p_z
+    cp = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    T = es.RENDER_TIMES
+    exact = 2.0 * math.sqrt((T + 1) / (T - 1))  # sqrt(12) x the RMS of T evenly spaced positions over 2 views
+    flat = np.full((24, 32), 0.75, np.float32)
+    # every point 0.75 - (-0.5) = 1.25 px/view from infinity: the image moves 1.25 x 2 views = 2.5 px
+    assert es.blur_length(cp, sharp, flat, -0.5) == pytest.approx(1.25 * exact, rel=1e-9)
+    assert es.blur_length(cp, sharp, flat, 0.75) == 0.0  # points at infinity do not move
+    assert es.blur_length(np.zeros((2, 3)), sharp, flat, 0.0) == 0.0
+    # in y by the same amount: the same length; both: the lengths add in quadrature
+    assert es.blur_length(cp[:, [1, 0, 2]], sharp, flat, -0.5) == pytest.approx(1.25 * exact, rel=1e-9)
+    both = cp + cp[:, [1, 0, 2]]
+    assert es.blur_length(both, sharp, flat, -0.5) == pytest.approx(1.25 * exact * math.sqrt(2), rel=1e-9)
+    # the motion of flat regions does not count: disparity only where the image has no gradient
+    sharp[..., :, 16:, :] = 0.5
+    split = flat.copy()
+    split[:, 17:] = 10.0
+    assert es.blur_length(cp, sharp, split, -0.5) == pytest.approx(1.25 * exact, rel=1e-9)
+
+
+def test_summary_by_blur_length(blind_eval):
+    rows = [
+        {"case": "a", "method": "input (blurred)", "psnr": 30.0, "blur_px": 0.5},
+        {"case": "b", "method": "input (blurred)", "psnr": 28.0, "blur_px": 3.0},
+        {"case": "a", "method": "default", "psnr": 30.0, "gain": 0.0, "blur_px": 0.5, "restored_blur_px": 0.0,
+         "estimate_blur_px": 1.0},
+        {"case": "b", "method": "default", "psnr": 32.0, "gain": 4.0, "blur_px": 3.0, "restored_blur_px": 4.5,
+         "estimate_blur_px": 4.5},
+    ]
+    means = {m["group"]: m for m in blind_eval.summarise(rows, ["default"], blind_eval.BLUR_GROUPS)}
+    assert set(means) == {"no blur or < 1 px", "≥ 2 px"}
+    assert means["≥ 2 px"]["gain"] == 4.0 and means["≥ 2 px"]["length_ratio"] == pytest.approx(1.5)
+    low = means["no blur or < 1 px"]
+    assert low["length_ratio"] == 0.0 and low["estimate_ratio"] == pytest.approx(2.0)  # returned, found 2x
+    table = "\n".join(blind_eval._blur_table(list(means.values())))
+    assert "| ≥ 2 px | default | 1 | 28.00 | +4.00 |" in table and "| 0.00 | 2.00 |" in table
 
 
 def test_peak_memory_sees_an_allocation(blind_eval):
