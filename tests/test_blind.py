@@ -1155,3 +1155,25 @@ def test_adam_takes_the_steps_of_torch_optim_adam():
     for m, t in zip(mine, theirs):
         torch.testing.assert_close(m, t, rtol=0, atol=0)  # the same arithmetic, step by step
     assert not torch.equal(mine[0], start_a)  # it moved
+
+
+def test_transposed_views_are_warned_about_before_any_work(recwarn):
+    from _reference import moving_texture
+
+    from napari_lfdeblur.epi import ViewOrderWarning
+
+    lf = moving_texture(n_views=5, d=1.5, size=32)  # u moves the image along x by 1.5 px/view, v along y
+
+    def view_order_warnings():
+        return [w for w in recwarn if issubclass(w.category, ViewOrderWarning)]
+
+    iter_blind_deblur(lf, device="cpu").close()
+    assert not view_order_warnings()
+    iter_blind_deblur(lf.swapaxes(0, 1), device="cpu").close()  # checked when the generator is made
+    (w,) = view_order_warnings()
+    assert str(w.message).startswith("the blurred light field: the views look transposed")
+    assert "swapaxes(0, 1)" in str(w.message) and w.filename == __file__  # names the caller's line
+    np.testing.assert_allclose(w.message.shifts, [[0.0, 1.5], [1.5, 0.0]], atol=0.05)
+    recwarn.clear()
+    iter_blind_deblur(lf.swapaxes(0, 1), device="cpu", check_view_order=False).close()
+    assert not view_order_warnings()

@@ -162,6 +162,28 @@ def test_transposed_views_are_named_and_swapped_on_request(tmp_path, capsys):
     np.testing.assert_allclose(read_lightfield(out), simulate_blur(lf, linear_path(2.0), n_times=8), atol=1e-6)
 
 
+def test_deblur_says_once_that_the_views_look_transposed(tmp_path, capsys, monkeypatch):
+    from _reference import moving_texture
+
+    from napari_lfdeblur import blind
+    from napari_lfdeblur.progress import Progress
+
+    np.save(tmp_path / "transposed.npy", moving_texture(n_views=5, d=1.0, size=32).swapaxes(0, 1))
+    seen = []
+
+    def fake_iter_blind_deblur(lf, **kwargs):
+        seen.append(kwargs["check_view_order"])
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind.BlindResult(lf, np.zeros((3, 3)), params=kwargs["params"])
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
+    for extra in ([], ["--swap-views"]):
+        out = tmp_path / f"o{len(extra)}.npz"
+        assert main(["deblur", str(tmp_path / "transposed.npy"), str(out), "--device", "cpu", *extra]) == 0
+        assert capsys.readouterr().err.count("look transposed") == (0 if extra else 1)  # the reader's, with its fix
+    assert seen == [False, False]  # the solver does not check what the reader checked
+
+
 @pytest.mark.parametrize("value", ["nan", "inf", "100"])
 def test_deblur_refuses_a_bad_infinity_disparity_in_one_line(lf_file, tmp_path, capsys, value):
     _, src = lf_file
@@ -317,7 +339,8 @@ def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, 
     _, src = lf_file
     seen = {}
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None,
+                               check_view_order=True):
         seen["params"] = params
         yield Progress("path", 1, 1, loss=1.0)
         cp = preset_path("shake6", 1.0, 0)
@@ -351,7 +374,8 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     rejected = linear_path(1.5, 30.0)
 
     # the evidence test says no
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None,
+                               check_view_order=True):
         yield Progress("path", 1, 1, loss=1.0)
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params,
                                  info={"blur_found": False, "message": "little blur found", "rejected_path": rejected})
@@ -394,7 +418,8 @@ def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_pa
 
     _, src = lf_file
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None,
+                               check_view_order=True):
         yield Progress("path", 1, 4, loss=0.125)
         yield Progress("path", 2, 4)  # inside a path-fit step: NaN loss
         yield Progress("path", 3, 4)
@@ -431,7 +456,8 @@ def test_deblur_options_reach_the_solver_and_are_checked(option, value, received
     _, src = lf_file
     seen = []
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None,
+                               check_view_order=True):
         seen.append(params.light_restoration if option == "--light-restoration" else max_memory)
         yield Progress("path", 1, 1, loss=1.0)
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params)

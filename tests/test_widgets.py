@@ -790,7 +790,7 @@ def test_blind_motion_choice_reaches_the_params_and_6dof_results_display(make_na
     cp6 = preset_path("shake6", 1.0, 0, rotation=0.01)[:4]
     seen = {}
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None, check_view_order=True):
         seen["params"] = params
         yield Progress("path", 1, 2, loss=1.0, control_points=cp6)
         return blind_core.BlindResult(lf, cp6, loss_history=[1.0], params=params)
@@ -862,6 +862,20 @@ def test_blind_windows_drawn_on_a_shapes_layer_reach_the_solver(make_napari_view
     assert len(seen) == 2
 
 
+def test_blind_checks_the_view_order_of_a_layer_no_reader_checked(make_napari_viewer, monkeypatch, lf, notifications):
+    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
+
+    seen = _fake_blind_solver(monkeypatch)
+    viewer = make_napari_viewer()
+    layer, _ = _blind_layer(viewer, lf)
+    w = _dock(viewer, BlindDeblurWidget(viewer))
+    w.layer_combo.set_layer(layer)
+    w.run_and_wait(timeout=60)
+    layer.metadata = {**layer.metadata, "view_shifts": [[0.6, 0.0], [0.0, 0.6]]}  # as the reader records it
+    w.run_and_wait(timeout=60)
+    assert [k["check_view_order"] for k in seen] == [True, False]
+
+
 def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch, lf, notifications):
     from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
 
@@ -925,7 +939,8 @@ def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_v
 
     rejected = np.array([[-0.6, 0.3, 0.1], [0.2, -0.4, 0.0], [0.4, 0.1, -0.1]])
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):  # the evidence test says no
+    # the evidence test says no
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None, check_view_order=True):
         yield Progress("path", 1, 1, loss=1.0)
         return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params,
                                       info={"blur_found": False, "message": "little blur found",
@@ -952,7 +967,7 @@ def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_v
     d.path_source.take_button.clicked.emit()
     assert d.form.infinity_disparity.value == 0.5
     # with blur found nothing is rejected: no such layer
-    def fake_found(lf, *, infinity_disparity, params, device, seed, windows=None):
+    def fake_found(lf, *, infinity_disparity, params, device, seed, windows=None, check_view_order=True):
         yield Progress("path", 1, 1, loss=1.0)
         return blind_core.BlindResult(lf, rejected, loss_history=[1.0], params=params, info={"blur_found": True})
 
@@ -976,7 +991,7 @@ def test_solver_steps_and_samples_run_on_one_torch_thread(make_napari_viewer, mo
     monkeypatch.setattr(_runner, "PREVIEW_SHARE", 0.0)
     seen = []
 
-    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None):
+    def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, windows=None, check_view_order=True):
         for i in range(3):
             seen.append(threading.current_thread())
             yield Progress("path", i, 3, loss=1.0, estimate=lambda: seen.append(threading.current_thread()) or lf)

@@ -255,7 +255,7 @@ def _run_deblur(args):
     lf, meta = _read(args)
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", [(args.input, meta)], 0.0)
     gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=args.device, seed=args.seed,
-                            max_memory=args.max_memory, windows=args.window)
+                            max_memory=args.max_memory, windows=args.window, check_view_order=False)  # _read did
     bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
 
     def show(rec):

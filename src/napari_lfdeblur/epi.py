@@ -8,6 +8,8 @@ place to see both blur and its removal.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from ._lightfield import check_int, validate_lightfield
@@ -19,6 +21,8 @@ __all__ = [
     "views_transposed",
     "shifts_measurable",
     "transposed_from_shifts",
+    "warn_if_transposed",
+    "ViewOrderWarning",
 ]
 
 
@@ -204,3 +208,46 @@ def transposed_from_shifts(shifts: np.ndarray, min_shift: float = 0.1) -> bool |
     if along > 2 * across:
         return False
     return None
+
+
+class ViewOrderWarning(UserWarning):
+    """The views of a light field look transposed against the light-field layout.
+
+    Its ``shifts`` attribute holds the measurement, as :func:`view_shifts` returns it.
+    """
+
+
+def warn_if_transposed(lf, source: str, *, fix: str = "", stacklevel: int = 2) -> np.ndarray | None:
+    """Measure the views' motion and warn (:class:`ViewOrderWarning`) when their axes look swapped.
+
+    Parameters
+    ----------
+    lf : ndarray, shape (V, U, Y, X) or (V, U, Y, X, C)
+        A checked light field (it is not validated again).
+    source : str
+        What the warning names: a file, or ``'the blurred light field'``.
+    fix : str, optional
+        A remedy to offer before swapping the first two axes (ends with
+        ``', or '``).
+    stacklevel : int, default 2
+        As in :func:`warnings.warn`, counted from the caller.
+
+    Returns
+    -------
+    ndarray of shape (2, 2), or None
+        :func:`view_shifts`' measurement; None where it cannot be made
+        (:func:`shifts_measurable`), and then nothing is warned.
+    """
+    if not shifts_measurable(lf.shape):
+        return None
+    shifts = view_shifts(lf, validate=False)
+    if transposed_from_shifts(shifts):
+        warning = ViewOrderWarning(
+            f"{source}: the views look transposed: stepping through u moves the image along y by "
+            f"{shifts[1, 0]:+.2f} px/view and stepping through v moves it along x by {shifts[0, 1]:+.2f} px/view, "
+            f"where the light-field layout has u move x and v move y. Blur, deconvolution and blind deblurring "
+            f"assume that layout: {fix}swap the first two axes (lf.swapaxes(0, 1))."
+        )
+        warning.shifts = shifts
+        warnings.warn(warning, stacklevel=stacklevel + 1)
+    return shifts

@@ -99,6 +99,7 @@ from .. import devices
 from .._lightfield import BRIGHT_LIMIT, brightest, check_number
 from .._memory import release_host_memory
 from ..blur import validate_lightfield
+from ..epi import warn_if_transposed
 from ..path import bezier_positions, canonical_time_direction, center_path, path_in_frame
 from ..progress import Progress, run_to_completion
 from ._alternating import iter_alternating, relay
@@ -143,6 +144,7 @@ def blind_deblur(
     callback=None,
     max_memory: float | None = None,
     windows=None,
+    check_view_order: bool = True,
     **overrides,
 ) -> BlindResult:
     """Estimate the camera path and the sharp light field of a motion-blurred light field.
@@ -182,6 +184,12 @@ def blind_deblur(
         the estimate off a subject that moved by itself (its blur is not
         the camera's); the whole light field is restored with the path
         found there.
+    check_view_order : bool, default True
+        Measure how the image moves from view to view and warn
+        (:class:`~napari_lfdeblur.epi.ViewOrderWarning`) when the angular
+        axes look swapped against the spatial ones (the model has ``u``
+        move ``x``; :func:`~napari_lfdeblur.views_transposed`). The readers
+        check files already: pass False for a light field just read.
     **overrides
         Fields of :class:`BlindParams` to change, as in
         :meth:`BlindParams.replace` (e.g. ``n_control_points=3``,
@@ -206,7 +214,8 @@ def blind_deblur(
         On an unknown keyword or parameter of the wrong type.
     """
     gen = iter_blind_deblur(blurred, params=params, infinity_disparity=infinity_disparity, device=device,
-                            seed=seed, max_memory=max_memory, windows=windows, **overrides)
+                            seed=seed, max_memory=max_memory, windows=windows,
+                            check_view_order=check_view_order, **overrides)
     return run_to_completion(gen, callback)
 
 
@@ -219,6 +228,7 @@ def iter_blind_deblur(
     seed: int = 0,
     max_memory: float | None = None,
     windows=None,
+    check_view_order: bool = True,
     **overrides,
 ):
     """Blind deblurring as a generator: yields progress, returns a :class:`BlindResult`.
@@ -261,6 +271,8 @@ def iter_blind_deblur(
         raise TypeError(f"seed must be an integer; got {seed!r}")
     windows = check_windows(windows, arr.shape, p)
     cap = check_max_memory(max_memory)
+    if check_view_order:
+        warn_if_transposed(arr, "the blurred light field", stacklevel=2)
     asked = devices.select_device(device)
     need = estimate_blind_memory(arr.shape, p)
     available = within(devices.free_memory, cap)

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..epi import ViewOrderWarning, warn_if_transposed
 from ._common import (
     MEMORY_LIMIT_ENV,
     InsufficientMemoryError,
@@ -322,32 +323,13 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
         warnings.warn(note, stacklevel=3)
 
 
-class ViewOrderWarning(UserWarning):
-    """The views of a light field just read look transposed against the light-field layout.
-
-    Its ``shifts`` attribute holds the measurement, as :func:`~napari_lfdeblur.view_shifts` returns it.
-    """
-
-
 def _check_view_order(lf, path, metadata) -> None:
     """Record the views' motion (px/view) in ``metadata`` and warn when the view axes look swapped."""
-    from ..epi import shifts_measurable, transposed_from_shifts, view_shifts
-
-    if not shifts_measurable(lf.shape):
-        return
-    shifts = view_shifts(lf, validate=False)
-    metadata["view_shifts"] = np.round(shifts, 3).tolist()
-    if transposed_from_shifts(shifts):
-        fix = (r"pass pattern=r'_(?P<col>\d+)_(?P<row>\d+)\.\w+$' to name the numbers the other way round, or "
-               if metadata["layout"] in ("views", "hci", "stanford") else "")
-        warning = ViewOrderWarning(
-            f"{path}: the views look transposed: stepping through u moves the image along y by "
-            f"{shifts[1, 0]:+.2f} px/view and stepping through v moves it along x by {shifts[0, 1]:+.2f} px/view, "
-            f"where the light-field layout has u move x and v move y. Blur, deconvolution and blind deblurring assume "
-            f"that layout: {fix}swap the first two axes (lf.swapaxes(0, 1))."
-        )
-        warning.shifts = shifts
-        warnings.warn(warning, stacklevel=3)
+    fix = (r"pass pattern=r'_(?P<col>\d+)_(?P<row>\d+)\.\w+$' to name the numbers the other way round, or "
+           if metadata["layout"] in ("views", "hci", "stanford") else "")
+    shifts = warn_if_transposed(lf, str(path), fix=fix, stacklevel=3)
+    if shifts is not None:
+        metadata["view_shifts"] = np.round(shifts, 3).tolist()
 
 
 def read_lightfield(path, *, layout: str | None = None, value_range=None, max_bytes=None, angular_crop=None,

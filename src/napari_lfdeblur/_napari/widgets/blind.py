@@ -266,8 +266,10 @@ class BlindDeblurWidget(SolverWidget):
         windows = None if f.windows.value is None else windows_from_shapes(f.windows.value, layer)
         if windows is not None:
             settings["windows"] = [list(w) for w in windows]
+        # a layer the reader made was checked for transposed views when read (it records view_shifts)
         gen = iter_blind_deblur(lf, infinity_disparity=settings["infinity_disparity"], params=params,
-                                device=settings["device"], seed=settings["seed"], windows=windows)
+                                device=settings["device"], seed=settings["seed"], windows=windows,
+                                check_view_order="view_shifts" not in layer.metadata)
         self._job = {"source": layer.name, "shape": lf.shape, "true": self.true_path(),
                      "n_times": params.n_times, "settings": settings}
         self.loss_plot.reset()
