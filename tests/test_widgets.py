@@ -366,15 +366,22 @@ def _blind_layer(viewer, lf):
     return add_layer(viewer, lightfield_layer_data(blurred, name="b", metadata=meta)), cp
 
 
-def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
-    pytest.importorskip("napari_lfdeblur.blind")
+def _blind_dock(make_napari_viewer, lf):
+    """A viewer holding ``_blind_layer``'s blurred layer and a docked *Blind deblur* widget set to it:
+    ``(viewer, layer, true path, widget)``."""
     from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
 
     viewer = make_napari_viewer()
-    layer, cp_true = _blind_layer(viewer, lf)
-    before = layer.data.copy()
+    layer, cp = _blind_layer(viewer, lf)
     w = _dock(viewer, BlindDeblurWidget(viewer))
     w.layer_combo.set_layer(layer)
+    return viewer, layer, cp, w
+
+
+def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
+    pytest.importorskip("napari_lfdeblur.blind")
+    viewer, layer, cp_true, w = _blind_dock(make_napari_viewer, lf)
+    before = layer.data.copy()
     assert w.form.true_path.current_choice == "b"  # the true path comes from the metadata
     w.form.n_control_points.value = 3
     w.form.n_iter.value = 2
@@ -425,12 +432,7 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
 def _long_blind_run(make_napari_viewer, qtbot, lf):
     """A viewer and a *Blind deblur* widget whose (endless) run has shown its live path preview."""
     pytest.importorskip("napari_lfdeblur.blind")
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
-
-    viewer = make_napari_viewer()
-    layer, _ = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.layer_combo.set_layer(layer)
+    viewer, layer, _, w = _blind_dock(make_napari_viewer, lf)
     w.form.n_iter.value = 100000
     w.form.device.value = "cpu"
     worker = w.run()
@@ -783,7 +785,6 @@ def test_simulate_shake6_preset_and_a_too_large_rotation(make_napari_viewer, qtb
 def test_blind_motion_choice_reaches_the_params_and_6dof_results_display(make_napari_viewer, monkeypatch, lf,
                                                                          notifications):
     import napari_lfdeblur.blind as blind_core
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
     from napari_lfdeblur.path import preset_path
     from napari_lfdeblur.progress import Progress
 
@@ -796,10 +797,7 @@ def test_blind_motion_choice_reaches_the_params_and_6dof_results_display(make_na
         return blind_core.BlindResult(lf, cp6, loss_history=[1.0], params=params)
 
     monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
-    viewer = make_napari_viewer()
-    layer, _ = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.layer_combo.set_layer(layer)
+    viewer, layer, _, w = _blind_dock(make_napari_viewer, lf)
     assert w.form.motion.value == "3dof" and "slower" in w.form.motion.tooltip.lower()
     w.form.motion.value = "6dof"
     names = [layer.name for layer in w.run_and_wait(timeout=60)]
@@ -835,13 +833,8 @@ def _fake_blind_solver(monkeypatch) -> list:
 
 
 def test_blind_windows_drawn_on_a_shapes_layer_reach_the_solver(make_napari_viewer, monkeypatch, lf, notifications):
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
-
     seen = _fake_blind_solver(monkeypatch)
-    viewer = make_napari_viewer()
-    layer, _ = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.layer_combo.set_layer(layer)
+    viewer, layer, _, w = _blind_dock(make_napari_viewer, lf)
     assert w.form.windows.value is None  # by default the solver chooses
     marks = viewer.add_shapes(ndim=4, name="static part")  # drawn over the light field, at view (2, 3)
     marks.add_rectangles(np.array([[2, 3, 1.2, 2.6], [2, 3, 1.2, 13.4], [2, 3, 10.4, 13.4], [2, 3, 10.4, 2.6]]))
@@ -863,13 +856,8 @@ def test_blind_windows_drawn_on_a_shapes_layer_reach_the_solver(make_napari_view
 
 
 def test_blind_checks_the_view_order_of_a_layer_no_reader_checked(make_napari_viewer, monkeypatch, lf, notifications):
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
-
     seen = _fake_blind_solver(monkeypatch)
-    viewer = make_napari_viewer()
-    layer, _ = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.layer_combo.set_layer(layer)
+    viewer, layer, _, w = _blind_dock(make_napari_viewer, lf)
     w.run_and_wait(timeout=60)
     layer.metadata = {**layer.metadata, "view_shifts": [[0.6, 0.0], [0.0, 0.6]]}  # as the reader records it
     w.run_and_wait(timeout=60)
@@ -877,13 +865,8 @@ def test_blind_checks_the_view_order_of_a_layer_no_reader_checked(make_napari_vi
 
 
 def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch, lf, notifications):
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
-
     calls = _fake_blind_solver(monkeypatch)
-    viewer = make_napari_viewer()
-    layer, _ = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.layer_combo.set_layer(layer)
+    viewer, layer, _, w = _blind_dock(make_napari_viewer, lf)
     assert w.form.restore_anyway.value is False  # the presets require evidence of blur
     w.run_and_wait(timeout=60)
     w.form.restore_anyway.value = True
@@ -933,7 +916,6 @@ def test_widgets_take_the_infinity_disparity_a_layer_states(make_napari_viewer, 
 def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_viewer, monkeypatch, lf,
                                                                     notifications):
     import napari_lfdeblur.blind as blind_core
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
     from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
     from napari_lfdeblur.progress import Progress
 
@@ -947,10 +929,7 @@ def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_v
                                             "rejected_path": rejected})
 
     monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_iter_blind_deblur)
-    viewer = make_napari_viewer()
-    layer, _ = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.layer_combo.set_layer(layer)
+    viewer, layer, _, w = _blind_dock(make_napari_viewer, lf)
     w.form.infinity_disparity.value = 0.5
     names = [layer.name for layer in w.run_and_wait(timeout=60)]
     assert names == ["b deblurred (blind)", "b estimated path", "b rejected path"]
@@ -984,7 +963,6 @@ def test_solver_steps_and_samples_run_on_one_torch_thread(make_napari_viewer, mo
     import napari_lfdeblur.blind as blind_core
     from napari_lfdeblur._napari import sample_data
     from napari_lfdeblur._napari.widgets import _runner
-    from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
     from napari_lfdeblur.progress import Progress
 
     # previews at every step, not also spaced by their cost: on a loaded machine that spacing can skip one
@@ -1001,10 +979,7 @@ def test_solver_steps_and_samples_run_on_one_torch_thread(make_napari_viewer, mo
     real_blur = sample_data.simulate_blur
     monkeypatch.setattr(sample_data, "simulate_blur",
                         lambda *a, **k: seen.append(threading.current_thread()) or real_blur(*a, **k))
-    viewer = make_napari_viewer()
-    layer, _ = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
-    w.layer_combo.set_layer(layer)
+    viewer, layer, _, w = _blind_dock(make_napari_viewer, lf)
     w.form.preview_every.value = 1
     for _ in range(2):
         assert w.run_and_wait(timeout=60)
