@@ -116,6 +116,21 @@ def test_deblur_equals_the_serial_api_bit_for_bit(client, tmp_path):
             assert "rejected_control_points" not in doc
 
 
+def test_a_deblur_item_leaves_the_view_order_to_its_reader(tmp_path, recwarn):
+    from _reference import moving_texture
+
+    from napari_lfdeblur.batch._items import _deblur
+    from napari_lfdeblur.epi import ViewOrderWarning
+
+    lf = moving_texture(n_views=3, d=1.0, size=16).swapaxes(0, 1)  # views that look transposed
+    spec = {"parameters": {"params": TINY.to_dict(), "infinity_disparity": 0.0}, "input": str(tmp_path / "a.npz"),
+            "item_seed": 0}
+    _deblur(lf, spec, "cpu", {})
+    assert not [w for w in recwarn if issubclass(w.category, ViewOrderWarning)]  # the read of its file warned
+    blind_deblur(lf, params=TINY, device="cpu")  # the same array given to the API is checked
+    assert [w for w in recwarn if issubclass(w.category, ViewOrderWarning)]
+
+
 def test_deblur_takes_each_inputs_stated_infinity_disparity(client, tmp_path):
     rng = np.random.default_rng(2)
     lf = rng.random((3, 3, 16, 16)).astype(np.float32)
