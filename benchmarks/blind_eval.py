@@ -397,29 +397,30 @@ def summarise(rows: list[dict], methods: list[str], groups=None) -> list[dict]:
     return out
 
 
+def _table(head: str, means: list[dict], cells) -> list[str]:
+    """A markdown table: ``head``, then one row of ``cells(m)`` per group mean ``m``."""
+    return [head, "|" + "---|" * (head.count("|") - 1), *("| " + " | ".join(cells(m)) + " |" for m in means)]
+
+
+def _worst(m: dict) -> str:
+    return _fmt(m["worst_gain"], "+.2f") + (f" ({m['worst_case']})" if m["worst_case"] else "")
+
+
 def _summary_table(means: list[dict]) -> list[str]:
     head = ("| group | method | cases | blurred PSNR dB | PSNR dB | gain dB | worst gain dB (case) | blur mismatch "
             "| SSIM | time s (mean / max) |")
-    out = [head, "|" + "---|" * (head.count("|") - 1)]
-    for m in means:
-        worst = _fmt(m["worst_gain"], "+.2f") + (f" ({m['worst_case']})" if m["worst_case"] else "")
-        out.append(f"| {m['group']} | {m['method']} | {m['n']} | {_fmt(m['blurred_psnr'], '.2f')} "
-                   f"| {_fmt(m['psnr'], '.2f')} | {_fmt(m['gain'], '+.2f')} | {worst} "
-                   f"| {_fmt(m['blur_mismatch'], '.3f')} | {_fmt(m['ssim'], '.4f')} "
-                   f"| {_fmt(m['seconds'], '.1f')} / {_fmt(m['seconds_max'], '.1f')} |")
-    return out
+    return _table(head, means, lambda m: [
+        m["group"], m["method"], str(m["n"]), _fmt(m["blurred_psnr"], ".2f"), _fmt(m["psnr"], ".2f"),
+        _fmt(m["gain"], "+.2f"), _worst(m), _fmt(m["blur_mismatch"], ".3f"), _fmt(m["ssim"], ".4f"),
+        f"{_fmt(m['seconds'], '.1f')} / {_fmt(m['seconds_max'], '.1f')}"])
 
 
 def _blur_table(means: list[dict]) -> list[str]:
     head = ("| true blur length | method | cases | blurred PSNR dB | gain dB | worst gain dB (case) | blur mismatch "
             "| blur length / true (median): restored with | estimated |")
-    out = [head, "|" + "---|" * (head.count("|") - 1)]
-    for m in means:
-        worst = _fmt(m["worst_gain"], "+.2f") + (f" ({m['worst_case']})" if m["worst_case"] else "")
-        out.append(f"| {m['group']} | {m['method']} | {m['n']} | {_fmt(m['blurred_psnr'], '.2f')} "
-                   f"| {_fmt(m['gain'], '+.2f')} | {worst} | {_fmt(m['blur_mismatch'], '.3f')} "
-                   f"| {_fmt(m['length_ratio'], '.2f')} | {_fmt(m['estimate_ratio'], '.2f')} |")
-    return out
+    return _table(head, means, lambda m: [
+        m["group"], m["method"], str(m["n"]), _fmt(m["blurred_psnr"], ".2f"), _fmt(m["gain"], "+.2f"), _worst(m),
+        _fmt(m["blur_mismatch"], ".3f"), _fmt(m["length_ratio"], ".2f"), _fmt(m["estimate_ratio"], ".2f")])
 
 
 def _case_table(rows: list[dict]) -> list[str]:
