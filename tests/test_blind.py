@@ -8,7 +8,7 @@ import pytest
 import torch
 from scipy.ndimage import gaussian_filter, map_coordinates
 
-from napari_lfdeblur import blind, devices
+from napari_lfdeblur import _disparity as core_disparity, blind, devices
 from napari_lfdeblur.blind import (
     BlindParams,
     BlindResult,
@@ -666,7 +666,7 @@ def test_fused_view_variance_is_the_variance_of_the_refocused_views(dtype):
         pytest.skip("numba is not installed")
     f = torch.as_tensor(np.random.default_rng(2).random((3, 5, 7, 9, 1)).astype(dtype))
     shears = [-2.3, -0.5, 0.0, 0.7, 4.0]  # 4 px/view reads far past the edges
-    got = _disparity._view_variances(f, shears)
+    got = core_disparity._view_variances(f, shears)
     want = torch.stack([_disparity.shear(f, d).var(dim=(0, 1))[..., 0] for d in shears])
     assert got.dtype == f.dtype and got.shape == (5, 7, 9)
     torch.testing.assert_close(got, want, rtol=1e-5 if dtype == "float32" else 1e-12, atol=0)

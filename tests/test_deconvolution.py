@@ -750,6 +750,12 @@ def test_cli_deconvolve(tmp_path, capsys):
         np.testing.assert_allclose(read_lightfield(out), ref, atol=1e-5)
     assert not np.allclose(ref, deconvolve(bright, cp, n_times=8, n_iter=3))
     np.savez(src, lf=blurred)
+    # --along-disparity: the anisotropic TV along the scene's disparity
+    assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--iterations", "3",
+                 "--along-disparity"]) == 0
+    ref = deconvolve(blurred, cp, n_times=8, n_iter=3, angular="disparity", isotropic=False)
+    np.testing.assert_allclose(read_lightfield(out), ref, atol=1e-5)
+    assert not np.allclose(ref, deconvolve(blurred, cp, n_times=8, n_iter=3))
     # the weight the rule chose is stored with the result: given back, it restores the same light field
     assert main(["deconvolve", str(src), str(path_file), str(out), "--overwrite", "--iterations", "4"]) == 0
     chosen, meta = read_lightfield_with_metadata(out)

@@ -45,8 +45,8 @@ import warnings
 import numpy as np
 import torch
 
-__all__ = ["available", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad", "FusedTaps", "prox_sweep",
-           "prox_primal", "tv_value", "view_variance", "add_laplacian", "tile_accumulate", "tile_shift_grads"]
+__all__ = ["available", "call", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad", "FusedTaps",
+           "prox_sweep", "prox_primal", "tv_value", "view_variance", "add_laplacian", "tile_accumulate", "tile_shift_grads"]
 
 _LOCK = threading.Lock()  # numba's default thread pool runs one parallel loop at a time
 
@@ -72,11 +72,16 @@ def available(device, dtype=torch.float32) -> bool:
 
 
 def _run(name, *args):
+    call(getattr(_loops(), name), *args)
+
+
+def call(loop, *args):
+    """Run the compiled parallel ``loop`` on ``args`` with torch's number of threads, one loop at a time."""
     import numba
 
     with _LOCK:
         numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
-        getattr(_loops(), name)(*args)
+        loop(*args)
 
 
 def _check_writable(t: torch.Tensor) -> None:
@@ -209,7 +214,7 @@ def view_variance(f, y0, y1, wy, x0, x1, wx) -> torch.Tensor:
 
     The shears' bilinear taps are numpy arrays: ``y0, y1`` (int64) and
     ``wy`` of shape (n, V, Y), ``x0, x1, wx`` of shape (n, U, X), as
-    ``blind._disparity.shear_taps`` makes them (``wy`` and ``wx`` in ``f``'s dtype).
+    ``_disparity.shear_taps`` makes them (``wy`` and ``wx`` in ``f``'s dtype).
     """
     arr = rows(f)
     out = np.empty((wy.shape[0], f.shape[2], f.shape[3]), arr.dtype)

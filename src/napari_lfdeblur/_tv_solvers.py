@@ -20,11 +20,13 @@ from .progress import check_cancelled
 __all__ = ["PROX_BLOCK_BYTES", "TVProx", "tv_value", "iter_fista_tv"]
 
 
-def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False) -> float:
+def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False, oriented=None) -> float:
     """``TV4(x)`` without materialising the four gradient components at once.
 
     ``coupled``: the colour TV of :func:`~napari_lfdeblur.priors.tv4d`, the
-    norm taken over the last axis (the channels) too.
+    norm taken over the last axis (the channels) too. ``oriented``: an
+    :class:`~napari_lfdeblur._oriented.OrientedDifferences` whose angular
+    differences replace those along the view axes (None: the view axes).
 
     ``buffers``, two tensors of ``x``'s shape, are used as scratch space
     instead of new allocations (large fresh tensors cost page faults on every
@@ -32,7 +34,7 @@ def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False) -> float:
     fused loop instead (:func:`~napari_lfdeblur._fused.tv_value`) where it
     is available.
     """
-    if x.dim() in (4, 5) and _fused.available(x.device, x.dtype):
+    if oriented is None and x.dim() in (4, 5) and _fused.available(x.device, x.dtype):
         return _fused.tv_value(x, axis_weights, isotropic, coupled)
     acc, diff_buf = buffers if buffers is not None else (torch.empty_like(x), torch.empty_like(x))
     if isotropic:
@@ -42,7 +44,11 @@ def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False) -> float:
         n = x.shape[axis]
         if n < 2 or axis_weights[axis] == 0:
             continue
-        diff = torch.sub(x.narrow(axis, 1, n - 1), x.narrow(axis, 0, n - 1), out=diff_buf.narrow(axis, 0, n - 1))
+        if oriented is not None and axis < 2:
+            diff = diff_buf.narrow(axis, 0, n - 1)
+            diff.copy_(oriented.difference(x, axis).narrow(axis, 0, n - 1))
+        else:
+            diff = torch.sub(x.narrow(axis, 1, n - 1), x.narrow(axis, 0, n - 1), out=diff_buf.narrow(axis, 0, n - 1))
         if axis_weights[axis] != 1.0:
             diff.mul_(axis_weights[axis])
         if isotropic:
@@ -91,23 +97,34 @@ class TVProx:
     computes the same iteration with each row's primal, dual step and
     projection in one loop (``rows`` is then unused; the primal needs a
     whole-field buffer, the first of ``scratch`` when given).
+
+    ``oriented``: an :class:`~napari_lfdeblur._oriented.OrientedDifferences`
+    whose angular differences replace those along the view axes (then the
+    torch iteration, over the whole field at once: ``rows`` is unused).
     """
 
     def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch=None,
-                 coupled=False, rows: int | None = None):
+                 coupled=False, rows: int | None = None, oriented=None):
         self.n_inner = n_inner
         self.isotropic = isotropic
         self.coupled = coupled
         self.aw = axis_weights
         self.box = box
-        self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
+        self.oriented = oriented
+        if oriented is None:
+            self.lip = max(gradient_norm_bound(axis_weights), 1e-12)
+        else:
+            bounds = (oriented.norm_bound(0), oriented.norm_bound(1), 4.0, 4.0)
+            self.lip = max(sum(w * w * b for w, b in zip(axis_weights, bounds)), 1e-12)
         self.p = [torch.zeros_like(like) for _ in range(4)]
-        self.fused = like.dim() in (4, 5) and _fused.available(like.device, like.dtype)
+        self.fused = oriented is None and like.dim() in (4, 5) and _fused.available(like.device, like.dtype)
         if self.fused:
             self.x = scratch[0] if scratch is not None else torch.empty_like(like)
             return
         Y = like.shape[2]
-        if rows is None:
+        if oriented is not None:
+            rows = Y
+        elif rows is None:
             row_bytes = max(1, like.narrow(2, 0, 1).numel() * like.element_size())
             rows = Y if like.device.type != "cpu" else PROX_BLOCK_BYTES // row_bytes
         self.rows = max(1, min(Y, int(rows)))
@@ -126,6 +143,9 @@ class TVProx:
         for axis, g in enumerate(self.p):
             n, w = g.shape[axis], mu * self.aw[axis]
             if n == 1:
+                continue
+            if self.oriented is not None and axis < 2:  # the whole field (rows = Y): -w D^T g
+                self.oriented.add_adjoint(g, axis, out, alpha=-w)
                 continue
             # as divergence4d: div_i += w g_i for i <= n - 2, div_i -= w g_{i-1} for i >= 1
             if axis != 2:
@@ -148,6 +168,9 @@ class TVProx:
         for axis, g in enumerate(self.p):
             m, w = g.shape[axis], step * self.aw[axis]
             if m < 2 or self.aw[axis] == 0:
+                continue
+            if self.oriented is not None and axis < 2:  # the whole field (rows = Y)
+                g.add_(self.oriented.difference(x, axis), alpha=w)
                 continue
             if axis != 2:
                 xs, gr = x.narrow(2, 0, n), g.narrow(2, y0, n)
@@ -210,7 +233,7 @@ def _dist2(a, b, buf) -> float:
 
 @torch.no_grad()
 def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, box, n_inner, lip=1.0,
-                  record=None, coupled=False, ceiling=None):
+                  record=None, coupled=False, ceiling=None, oriented=None):
     """FISTA iterations; yields ``record(iteration, x, info)``, returns the last ``x``.
 
     ``box`` is None or ``(lo, hi)`` (``hi`` None: no upper bound); ``ceiling``:
@@ -227,6 +250,9 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
 
     ``coupled``: the TV is the colour TV over the last axis of ``f``
     (:func:`~napari_lfdeblur.priors.tv4d` with ``coupled_channels``).
+    ``oriented``: angular differences along a disparity map
+    (:class:`~napari_lfdeblur._oriented.OrientedDifferences`; None: along the
+    view axes).
 
     The iterates live in buffers allocated once and reused: the ``x`` of a
     record is overwritten two iterations later (copy it to keep it).
@@ -235,14 +261,15 @@ def iter_fista_tv(op, f, x0, *, weight, n_iter, tol, isotropic, axis_weights, bo
     (:func:`~napari_lfdeblur.progress.check_cancelled`) after every blur
     evaluation, every inner iteration of the proximal map and the objective.
     """
-    tv = (isotropic, axis_weights, coupled)
+    tv = (isotropic, axis_weights, coupled, oriented)
     x = x0.clone() if box is None else x0.clamp(*box)
     x_new, y, work, spare = (torch.empty_like(x) for _ in range(4))
     Kx = op.forward(x)
     Ky, kwork = Kx.clone(), torch.empty_like(Kx)
     y.copy_(x)
     # the prox's primal and dual norm live only during a call: in spare and kwork, free then
-    prox = TVProx(x, n_inner, isotropic, axis_weights, box, scratch=(spare, kwork), coupled=coupled)
+    prox = TVProx(x, n_inner, isotropic, axis_weights, box, scratch=(spare, kwork), coupled=coupled,
+                  oriented=oriented)
     scratch = (work, spare)
     # the censored samples, as flat indices: their number, not the light field's size, sets the memory
     censored = None
@@ -307,8 +334,8 @@ def _residual(Kx, f, out, censored):
 def _objective(x, Kx, f, weight, tv, kbuf, scratch, censored=None):
     """``(1/2 ||K x - f||^2 + w TV4(x), data term)`` from a precomputed ``K x``; ``kbuf``, ``scratch``: buffers.
 
-    ``tv``: ``(isotropic, axis_weights, coupled)`` of :func:`tv_value`; ``censored``: as in :func:`_residual`.
+    ``tv``: ``(isotropic, axis_weights, coupled, oriented)`` of :func:`tv_value`; ``censored``: as in
+    :func:`_residual`.
     """
     data = 0.5 * float(torch.linalg.vector_norm(_residual(Kx, f, kbuf, censored))) ** 2
-    isotropic, axis_weights, coupled = tv
-    return data + (weight * tv_value(x, isotropic, axis_weights, scratch, coupled) if weight > 0 else 0.0), data
+    return data + (weight * tv_value(x, *tv[:2], scratch, *tv[2:]) if weight > 0 else 0.0), data

@@ -330,13 +330,19 @@ def project_tv_dual(P: Sequence[torch.Tensor], radius: float, isotropic: bool = 
         return tuple(P)
     if not isotropic:  # coupled: each axis's vector over the channels
         for p in P:
-            scale = (p * p).sum(-1, keepdim=True).sqrt_().div_(radius).clamp_(min=1.0)
-            p.div_(scale)
+            _shrink(torch.mul(p, p, out=work) if work is not None else p * p, [p], radius, True)
         return tuple(P)
     norm = torch.mul(P[0], P[0], out=work) if work is not None else P[0] * P[0]
     for p in P[1:]:
         norm.addcmul_(p, p)
-    scale = sum_channels_(norm) if coupled_channels else norm  # the norm over the channels too
+    _shrink(norm, P, radius, coupled_channels)
+    return tuple(P)
+
+
+def _shrink(norm: torch.Tensor, P, radius: float, coupled: bool) -> None:
+    """Divide each of ``P`` by ``max(1, sqrt(norm) / radius)``, ``norm`` the squared norm per sample (summed over
+    the channels first when ``coupled``); ``norm`` is overwritten."""
+    scale = sum_channels_(norm) if coupled else norm
     scale.sqrt_()
     if radius != 1.0:  # the TV prox's ball is the unit one: no pass for it
         scale.div_(radius)
@@ -347,7 +353,6 @@ def project_tv_dual(P: Sequence[torch.Tensor], radius: float, isotropic: bool = 
         scale = norm
     for p in P:
         p.div_(scale)
-    return tuple(P)
 
 
 def sum_channels_(t: torch.Tensor) -> torch.Tensor:

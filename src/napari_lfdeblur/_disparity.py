@@ -1,0 +1,112 @@
+"""Disparity of a light field, and the resampling it shares with the blind solver's path stage.
+
+Grayscale, refocus (shear), spatial area-averaging, and the per-pixel
+disparity map: the shear that makes the views agree best.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from . import _fused
+from .blur import lerp_taps
+
+__all__ = ["gray", "shear_taps", "shear", "downsample", "disparity_map"]
+
+
+def gray(f: torch.Tensor) -> torch.Tensor:
+    """The mean over the colour axis of (V, U, Y, X, C), kept as a length-1 axis."""
+    return f.mean(dim=-1, keepdim=True)
+
+
+def shear_taps(shape, d: float, dtype, device):
+    """The bilinear taps of :func:`shear` by ``d`` for light fields of ``shape`` (V, U, Y, X[, C]).
+
+    Returns ``(ty, tx)``: ``ty`` a list over the view rows ``v`` of
+    ``(y0, y1, wy)``, each of shape (Y,), and ``tx`` the ``(x0, x1, wx)`` of
+    every view column, each (U, X), as :func:`~napari_lfdeblur.blur.lerp_taps`
+    gives them.
+    """
+    V, U, Y, X = shape[:4]
+    ys = torch.arange(Y, dtype=dtype, device=device)
+    ty = [lerp_taps(ys + d * (v - (V - 1) / 2.0), Y) for v in range(V)]
+    shift = torch.tensor([d * (u - (U - 1) / 2.0) for u in range(U)], dtype=dtype, device=device)  # px, per column
+    tx = lerp_taps(torch.arange(X, dtype=dtype, device=device)[None, :] + shift[:, None], X)  # (U, X)
+    return ty, tx
+
+
+def shear(f: torch.Tensor, d: float) -> torch.Tensor:
+    """Refocus: view ``(v, u)`` resampled at ``(y + d v_c, x + d u_c)`` (bilinear, replicate).
+
+    ``f`` is (V, U, Y, X, C); ``v_c, u_c`` are the view offsets from the
+    centre. With ``d = d_inf`` this maps the blur model with ``d_inf`` to the
+    one with ``d_inf = 0`` (up to interpolation): the path estimate runs on
+    the sheared light field.
+    """
+    V, U, Y, X, C = f.shape
+    dev = f.device
+    ty, (x0, x1, wx) = shear_taps(f.shape, d, f.dtype, dev)
+    # one lookup reads the columns of every view in a row of views: an index into the flattened (u, x) axis
+    first = (torch.arange(U, device=dev) * X)[:, None]
+    ix0, ix1 = (x0 + first).view(-1), (x1 + first).view(-1)
+    wx1 = wx.reshape(1, U * X, 1)
+    wx0 = 1 - wx1
+    out = torch.empty_like(f)
+    for v, (y0, y1, wy) in enumerate(ty):
+        fv = f[v].permute(1, 0, 2, 3)  # (Y, U, X, C)
+        rows = fv.index_select(0, y0) * (1 - wy)[:, None, None, None] + fv.index_select(0, y1) * wy[:, None, None, None]
+        rows = rows.reshape(Y, U * X, C)
+        cols = rows.index_select(1, ix0) * wx0 + rows.index_select(1, ix1) * wx1
+        out[v] = cols.view(Y, U, X, C).permute(1, 0, 2, 3)
+    return out
+
+
+def _view_variances(f: torch.Tensor, shears) -> torch.Tensor:
+    """(n, Y, X): the variance over the views of ``f`` (V, U, Y, X, 1) sheared by each of ``shears``.
+
+    On the CPU, by the fused loop (:func:`~napari_lfdeblur._fused.view_variance`)
+    with :func:`shear_taps`' taps stacked over the shears.
+    """
+    taps = [shear_taps(f.shape, d, f.dtype, f.device) for d in shears]
+    ys = [np.stack([np.stack([t[i].numpy() for t in ty]) for ty, _ in taps]) for i in range(3)]  # (n, V, Y)
+    xs = [np.stack([tx[i].numpy() for _, tx in taps]) for i in range(3)]  # (n, U, X)
+    return _fused.view_variance(f, *ys, *xs)
+
+
+def downsample(f: torch.Tensor, factor: int) -> torch.Tensor:
+    """Area-average the spatial axes of (V, U, Y, X, C) by ``factor`` (views untouched)."""
+    if factor == 1:
+        return f
+    V, U, Y, X, C = f.shape
+    Yc, Xc = (Y // factor) * factor, (X // factor) * factor
+    g = f[:, :, :Yc, :Xc].reshape(V, U, Yc // factor, factor, Xc // factor, factor, C)
+    return g.mean(dim=(3, 5))
+
+
+@torch.no_grad()
+def disparity_map(f: torch.Tensor, d_max: float = 2.5, n: int = 41, smooth: int = 2) -> np.ndarray:
+    """Per-pixel disparity (px/view) of a (blurred) light field (V, U, Y, X, 1).
+
+    The shear, among ``n`` in ``[-d_max, d_max]``, that makes the views agree
+    best (least angular variance, box-smoothed over ``2 smooth + 1`` px).
+    An in-plane blur keeps the views consistent at the scene's disparity.
+
+    Returns
+    -------
+    ndarray, float32, shape (Y, X)
+    """
+    best = torch.full(f.shape[2:4], math.inf, dtype=f.dtype, device=f.device)
+    arg = torch.zeros_like(best)
+    shears = [float(d) for d in np.linspace(-d_max, d_max, n)]
+    fused = _view_variances(f, shears) if _fused.available(f.device, f.dtype) else None
+    for k, d in enumerate(shears):
+        var = fused[k] if fused is not None else shear(f, d).var(dim=(0, 1))[..., 0]  # (Y, X)
+        var = torch.nn.functional.avg_pool2d(var[None, None], 2 * smooth + 1, stride=1, padding=smooth,
+                                             count_include_pad=False)[0, 0]
+        better = var < best
+        best = torch.where(better, var, best)
+        arg = arg.masked_fill(better, float(d))
+    return arg.cpu().numpy()
