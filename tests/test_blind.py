@@ -151,6 +151,20 @@ def test_the_final_stage_reports_its_weight_which_reproduces_the_result(linear_c
     np.testing.assert_allclose(again, res.lightfield, atol=1e-5)
 
 
+def test_the_final_stage_takes_the_tv_along_the_disparity(linear_case, linear_result):
+    from napari_lfdeblur.deconvolution import deconvolve
+
+    _, _, blurred = linear_case
+    params = linear_result.params.replace(final={"angular": "disparity", "isotropic": False})
+    res = blind_deblur(blurred, params=params, device="cpu")
+    np.testing.assert_array_equal(res.control_points, linear_result.control_points)  # the same path stage
+    assert res.info["final_weight"] == pytest.approx(0.5 * linear_result.info["final_weight"])  # the anisotropic rule
+    again = deconvolve(blurred, res.control_points, n_times=params.final_n_times, device="cpu",
+                       params=params.final.replace(weight=res.info["final_weight"]))
+    np.testing.assert_allclose(again, res.lightfield, atol=1e-5)
+    assert not np.allclose(res.lightfield, linear_result.lightfield, atol=1e-3)
+
+
 def test_clear_blur_is_found_with_its_evidence(linear_result):
     info = linear_result.info
     assert info["blur_found"] is True and "blur found" in info["message"] and info["restoration"] == "full"

@@ -74,11 +74,16 @@ class OrientedDifferences:
             self._numpy[t.dtype] = [(i0.numpy(), i1.numpy(), w.to(t.dtype).numpy()) for i0, i1, w in self.taps]
         return self._numpy[t.dtype][axis]
 
-    @staticmethod
-    def _loops():
+    def _fused(self, loop: str, t: torch.Tensor, axis: int, out: torch.Tensor, alpha: float) -> bool:
+        """Run ``loop`` of :mod:`~napari_lfdeblur._oriented_loops` on ``t`` into ``out`` where the fused loops can
+        (the CPU, contiguous tensors); whether it ran."""
+        taps = self._fused_args(t, axis) if out.is_contiguous() else None
+        if taps is None:
+            return False
         from . import _oriented_loops
 
-        return _oriented_loops
+        _fused.call(getattr(_oriented_loops, loop), self._flat(t).numpy(), axis, *taps, alpha, self._flat(out).numpy())
+        return True
 
     def _flat(self, t: torch.Tensor) -> torch.Tensor:
         V, U, Y, X, C = t.shape
@@ -112,12 +117,7 @@ class OrientedDifferences:
     def add_difference(self, x: torch.Tensor, axis: int, out: torch.Tensor, alpha: float = 1.0) -> torch.Tensor:
         """``out += alpha D_axis x`` (``out`` of ``x``'s shape); returns ``out``."""
         n = x.shape[axis]
-        if n < 2 or alpha == 0:
-            return out
-        taps = self._fused_args(x, axis) if out.is_contiguous() else None
-        if taps is not None:
-            _fused.call(self._loops().difference_add, self._flat(x).numpy(), axis, *taps, alpha,
-                        self._flat(out).numpy())
+        if n < 2 or alpha == 0 or self._fused("difference_add", x, axis, out, alpha):
             return out
         d = self.shift(x.narrow(axis, 1, n - 1), axis).sub_(x.narrow(axis, 0, n - 1))
         out.narrow(axis, 0, n - 1).add_(d, alpha=alpha)
@@ -126,12 +126,7 @@ class OrientedDifferences:
     def add_adjoint(self, g: torch.Tensor, axis: int, out: torch.Tensor, alpha: float = 1.0) -> torch.Tensor:
         """``out += alpha D_axis^T g`` (``g`` of ``D_axis``'s output shape; its last view is ignored)."""
         n = g.shape[axis]
-        if n < 2 or alpha == 0:
-            return out
-        taps = self._fused_args(g, axis) if out.is_contiguous() else None
-        if taps is not None:
-            _fused.call(self._loops().adjoint_add, self._flat(g).numpy(), axis, *taps, alpha,
-                        self._flat(out).numpy())
+        if n < 2 or alpha == 0 or self._fused("adjoint_add", g, axis, out, alpha):
             return out
         head = g.narrow(axis, 0, n - 1)
         out.narrow(axis, 0, n - 1).sub_(head, alpha=alpha)

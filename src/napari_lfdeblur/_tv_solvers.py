@@ -45,8 +45,7 @@ def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False, oriented=N
         if n < 2 or axis_weights[axis] == 0:
             continue
         if oriented is not None and axis < 2:
-            diff = diff_buf.narrow(axis, 0, n - 1)
-            diff.copy_(oriented.difference(x, axis).narrow(axis, 0, n - 1))
+            diff = oriented.add_difference(x, axis, diff_buf.zero_()).narrow(axis, 0, n - 1)
         else:
             diff = torch.sub(x.narrow(axis, 1, n - 1), x.narrow(axis, 0, n - 1), out=diff_buf.narrow(axis, 0, n - 1))
         if axis_weights[axis] != 1.0:
@@ -170,7 +169,7 @@ class TVProx:
             if m < 2 or self.aw[axis] == 0:
                 continue
             if self.oriented is not None and axis < 2:  # the whole field (rows = Y)
-                g.add_(self.oriented.difference(x, axis), alpha=w)
+                self.oriented.add_difference(x, axis, g, alpha=w)
                 continue
             if axis != 2:
                 xs, gr = x.narrow(2, 0, n), g.narrow(2, y0, n)

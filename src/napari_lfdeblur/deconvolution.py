@@ -91,7 +91,7 @@ __all__ = [
 
 METHODS = ("auto", "tv", "inplane")
 #: the angular differences of the TV (DeconvolutionParams.angular)
-ANGULAR = ("disparity", "views")
+ANGULAR = ("views", "disparity")
 
 #: default Tikhonov weight of ``'inplane'``
 INPLANE_WEIGHT = 2e-3
@@ -450,7 +450,8 @@ def deconvolve(
     params : DeconvolutionParams or dict, optional
         Solver parameters; single fields may also be given as keywords
         (``method=``, ``weight=``, ``n_iter=``, ``tol=``, ``isotropic=``,
-        ``axis_weights=``, ``couple_channels=``, ``clip=``) and override it.
+        ``axis_weights=``, ``angular=``, ``couple_channels=``, ``clip=``) and
+        override it.
     device : {'auto', 'cpu', 'cuda'}, default 'auto'
     init : ndarray, optional
         Initial estimate for ``'tv'`` (default: the blurred input).
@@ -469,8 +470,8 @@ def deconvolve(
     ------
     ValueError
         On a malformed light field or path, mismatched shapes, NaN, a
-        negative weight, an unknown method, or ``'inplane'`` for a path that
-        is not in-plane.
+        negative weight, an unknown method or kind of angular differences,
+        or ``'inplane'`` for a path that is not in-plane.
 
     Examples
     --------
