@@ -2,8 +2,10 @@
 
 ``deconvolve(method='tv')`` with ``weight=None`` uses ``w = NOISE_WEIGHT_FACTOR
 * sigma``, ``sigma`` from ``estimate_noise_sigma`` on the blurred input, for
-both priors: every channel with its own TV, and the colour TV
-(``couple_channels``). This script checks the rule on cases of its own, not
+every channel with its own TV, ``COLOUR_WEIGHT_FACTOR * sigma`` for the colour
+TV (``couple_channels``), and ``ANISOTROPIC_WEIGHT_SCALE`` times that for the
+anisotropic TV, here the colour TV along the scene's disparity
+(``angular='disparity', isotropic=False``). This script checks the rule on cases of its own, not
 the evaluation set of ``blind_eval.py``: the package's ``synthetic_scene``
 (piecewise-constant textures, random colours) and ``procedural_scene``
 (natural textures), two seeds each, blurred by random paths with ``p_z !=
@@ -32,7 +34,12 @@ import numpy as np
 import torch
 
 from napari_lfdeblur import deconvolve, procedural_scene, simulate_blur, synthetic_scene
-from napari_lfdeblur.deconvolution import COLOUR_WEIGHT_FACTOR, NOISE_WEIGHT_FACTOR, estimate_noise_sigma
+from napari_lfdeblur.deconvolution import (
+    ANISOTROPIC_WEIGHT_SCALE,
+    COLOUR_WEIGHT_FACTOR,
+    NOISE_WEIGHT_FACTOR,
+    estimate_noise_sigma,
+)
 from napari_lfdeblur.metrics import psnr
 from napari_lfdeblur.path import center_path, random_path
 
@@ -42,10 +49,13 @@ import _report  # noqa: E402  (benchmarks/_report.py)
 FACTORS = (0.1, 0.15, 0.2, 0.3, 0.45, 0.7)
 NOISES = (0.002, 0.01, 0.02)
 SCENES = (("synthetic", 0), ("synthetic", 1), ("procedural", 0), ("procedural", 1))
-#: the priors: every channel with its own TV, and the colour TV (``couple_channels``)
-PRIORS = {"separate": False, "colour": True}
-#: the default rule's factor of each prior
-RULES = {"separate": NOISE_WEIGHT_FACTOR, "colour": COLOUR_WEIGHT_FACTOR}
+#: the priors (``deconvolve``'s options): every channel with its own TV, the colour TV (``couple_channels``), and
+#: the anisotropic colour TV along the scene's disparity (``lfdeblur deconvolve --along-disparity``)
+PRIORS = {"separate": {"couple_channels": False}, "colour": {"couple_channels": True},
+          "disparity": {"couple_channels": True, "angular": "disparity", "isotropic": False}}
+#: the default rule's factor of each prior, in units of its isotropic rule (an anisotropic prior's weight is
+#: ``ANISOTROPIC_WEIGHT_SCALE`` times that: ``factor * ANISOTROPIC_WEIGHT_SCALE * sigma``)
+RULES = {"separate": NOISE_WEIGHT_FACTOR, "colour": COLOUR_WEIGHT_FACTOR, "disparity": COLOUR_WEIGHT_FACTOR}
 D_INFS = (0.0, 1.0)
 N_TIMES = 16
 CROP = 4
@@ -64,14 +74,15 @@ def make_case(shape, scene, d_inf, noise):
     return lf, cp, blurred
 
 
-def run_case(lf, cp, blurred, d_inf, factors, coupled):
-    """The PSNR gain over the input at each factor, with one prior."""
+def run_case(lf, cp, blurred, d_inf, factors, options):
+    """The PSNR gain over the input at each factor, with one prior (``deconvolve``'s ``options``)."""
     sigma = estimate_noise_sigma(blurred)
     base = psnr(blurred, lf, crop=CROP)
+    scale = 1.0 if options.get("isotropic", True) else ANISOTROPIC_WEIGHT_SCALE
     gains = []
     for f in factors:
-        out = deconvolve(blurred, cp, n_times=N_TIMES, infinity_disparity=d_inf, weight=f * sigma,
-                         couple_channels=coupled)
+        out = deconvolve(blurred, cp, n_times=N_TIMES, infinity_disparity=d_inf, weight=f * scale * sigma,
+                         **options)
         gains.append(psnr(out, lf, crop=CROP) - base)
     return gains
 
@@ -92,8 +103,8 @@ def main(argv=None) -> None:
     for scene, d_inf, noise in grid:
         lf, cp, blurred = make_case(shape, scene, d_inf, noise)
         sigma = estimate_noise_sigma(blurred)
-        for prior, coupled in PRIORS.items():
-            gains = run_case(lf, cp, blurred, d_inf, factors, coupled)
+        for prior, options in PRIORS.items():
+            gains = run_case(lf, cp, blurred, d_inf, factors, options)
             best, rule = int(np.argmax(gains)), factors.index(RULES[prior])
             by_noise.setdefault((noise, prior), []).append(gains)
             by_noise.setdefault((noise, f"{prior}, {scene[0]}"), []).append(gains)
@@ -113,11 +124,14 @@ def main(argv=None) -> None:
         f"of 3 control points (extent 2 views, `p_z` extent 1), T = {N_TIMES}; Gaussian noise; the non-blind "
         f"TV solve (`deconvolve`, default iterations and stopping) with the true path and the weight "
         f"`factor * sigma`, `sigma` estimated in the blurred input (`estimate_noise_sigma`), with every "
-        f"channel's own TV (`separate`) and with the colour TV (`colour`, `couple_channels=True`). Gains are "
+        f"channel's own TV (`separate`), with the colour TV (`colour`, `couple_channels=True`) and with the "
+        f"anisotropic colour TV along the scene's disparity (`disparity`, `angular='disparity', "
+        f"isotropic=False`), whose weight is `factor * {ANISOTROPIC_WEIGHT_SCALE} * sigma` "
+        f"(`ANISOTROPIC_WEIGHT_SCALE`). Gains are "
         f"PSNR over the blurred input, borders of {CROP} px left out. The default rule's factor is "
         f"{NOISE_WEIGHT_FACTOR} (`NOISE_WEIGHT_FACTOR`), {COLOUR_WEIGHT_FACTOR} for the colour TV "
-        f"(`COLOUR_WEIGHT_FACTOR`); 'rule loses' is against the prior's own factor. These cases are not those "
-        f"of `blind_eval.py`.",
+        f"(`COLOUR_WEIGHT_FACTOR`, also the `disparity` prior's in these units); 'rule loses' is against the "
+        f"prior's own factor. These cases are not those of `blind_eval.py`.",
         "", "## Mean gain by noise level", "", *summary, "", "## Per case", "", *rows,
     ]
     out = _report.table_path(args.out, __file__, smoke=args.quick)
