@@ -23,19 +23,16 @@ import math
 import torch
 
 from . import _fused
+from .blur import lerp_taps
 
 __all__ = ["OrientedDifferences"]
 
 
 def _taps(pos: torch.Tensor, n: int, stride: int, base: torch.Tensor):
-    """Flat indices ``(i0, i1)`` into ``Y * X`` and weight ``w`` of the clamped bilinear samples at ``pos``."""
-    if n < 2:
-        i0 = base.expand_as(pos).reshape(-1)
-        return i0, i0, torch.zeros(i0.shape, dtype=pos.dtype, device=pos.device)
-    p = pos.clamp(0, n - 1)
-    k = p.floor().clamp(max=n - 2)
-    i0 = (k.long() * stride + base).reshape(-1)
-    return i0, i0 + stride, (p - k).reshape(-1)
+    """Flat indices ``(i0, i1)`` into ``Y * X`` and weight ``w`` of the clamped bilinear samples at ``pos``
+    (:func:`~napari_lfdeblur.blur.lerp_taps` along an axis of ``n`` samples ``stride`` apart, from ``base``)."""
+    i0, i1, w = lerp_taps(pos, n)
+    return (i0 * stride + base).reshape(-1), (i1 * stride + base).reshape(-1), w.reshape(-1)
 
 
 class OrientedDifferences:
