@@ -84,7 +84,7 @@ def test_scene_disparity_finds_a_plane():
     assert scene_disparity(torch.zeros(3, 3, 8, 8, 1), 2.0).shape == (8, 8)
 
 
-@pytest.mark.parametrize("isotropic, coupled", [(True, True), (False, False)])
+@pytest.mark.parametrize("isotropic, coupled", [(True, True), (True, False), (False, True), (False, False)])
 def test_tv_prox_and_value_with_oriented_differences(isotropic, coupled, engine):
     rng = np.random.default_rng(3)
     shape = (3, 4, 6, 5, 2)

@@ -14,6 +14,7 @@ import numba
 import numpy as np
 
 from ._kernel_loops import tile_accumulate, tile_shift_grads
+from ._tv_loops import project_dual_row, tv_add_row, tv_row_norms
 
 __all__ = ["forward", "adjoint", "kernel_grad", "prox_sweep", "prox_primal", "tv_rows", "view_variance",
            "add_laplacian", "tile_accumulate", "tile_shift_grads"]
@@ -264,55 +265,7 @@ def _dual_row(p0, p1, p2, p3, xs, y, wd, C, isotropic, coupled, one, nrm):
                 h, nx, x0 = g3[:n], x[C:], x[:n]
                 for j in range(n):
                     h[j] += wd[3] * (nx[j] - x0[j])
-            _project(g0, g1, g2, g3, C, isotropic, coupled, one, nrm)
-
-
-@numba.njit(cache=True, fastmath={"contract"})
-def _project(g0, g1, g2, g3, C, isotropic, coupled, one, nrm):
-    """One row of the dual onto the unit ball of the TV's dual norm (as ``priors.project_tv_dual``).
-
-    ``one`` is 1 in the rows' dtype (float64 constants would promote the arithmetic).
-    """
-    XC = g0.shape[0]
-    if not isotropic and not coupled:
-        for j in range(XC):
-            g0[j] = min(max(g0[j], -one), one)
-            g1[j] = min(max(g1[j], -one), one)
-            g2[j] = min(max(g2[j], -one), one)
-            g3[j] = min(max(g3[j], -one), one)
-        return
-    if not isotropic:  # coupled: each component's vector over the channels
-        for g in (g0, g1, g2, g3):
-            for j in range(XC):
-                nrm[j] = g[j] * g[j]
-            _channel_scales(nrm, C, one)
-            for j in range(XC):
-                g[j] *= nrm[j]
-        return
-    for j in range(XC):
-        nrm[j] = g0[j] * g0[j] + g1[j] * g1[j] + g2[j] * g2[j] + g3[j] * g3[j]
-    if coupled:
-        _channel_scales(nrm, C, one)
-    else:
-        for j in range(XC):
-            nrm[j] = one / max(np.sqrt(nrm[j]), one)
-    for j in range(XC):
-        g0[j] *= nrm[j]
-        g1[j] *= nrm[j]
-        g2[j] *= nrm[j]
-        g3[j] *= nrm[j]
-
-
-@numba.njit(cache=True, fastmath={"contract"})
-def _channel_scales(nrm, C, one):
-    """``nrm`` (squares per sample) becomes ``1 / max(|.|, 1)`` of each pixel's norm over its ``C`` channels."""
-    for j in range(0, nrm.shape[0], C):
-        s = nrm[j]
-        for c in range(1, C):
-            s += nrm[j + c]
-        s = one / max(np.sqrt(s), one)
-        for c in range(C):
-            nrm[j + c] = s
+            project_dual_row(g0, g1, g2, g3, C, isotropic, coupled, one, nrm)
 
 
 @_jit
@@ -356,26 +309,6 @@ def _step(a, b, y, axis, side, V, U, Y):
     return a, b, y + side, 0 <= y + side < Y
 
 
-@numba.njit(cache=True, fastmath={"contract"})
-def _tv_add(d, acc, isotropic, coupled, C):
-    """Adds a row of weighted differences ``d`` to the TV: squares into ``acc`` (isotropic), else the norms."""
-    if isotropic:
-        for j in range(d.shape[0]):
-            acc[j] += d[j] * d[j]
-        return 0.0
-    total = 0.0
-    if coupled:
-        for j in range(0, d.shape[0], C):
-            s = d[j] * d[j]
-            for c in range(1, C):
-                s += d[j + c] * d[j + c]
-            total += np.sqrt(s)
-        return total
-    for j in range(d.shape[0]):
-        total += abs(d[j])
-    return total
-
-
 @_jit
 def tv_rows(x, w, C, isotropic, coupled, out):
     """``out[y]``: the TV4 of ``x`` (rows (V, U, Y, X * C)) summed over the row ``y`` (forward differences
@@ -397,22 +330,13 @@ def tv_rows(x, w, C, isotropic, coupled, out):
                     nxt = x[na, nb, ny]
                     for j in range(XC):
                         d[j] = w[axis] * (nxt[j] - row[j])
-                    total += _tv_add(d, acc, isotropic, coupled, C)
+                    total += tv_add_row(d, acc, isotropic, coupled, C)
                 if n > 0 and w[3] != 0:
                     d2, nx, r0 = d[:n], row[C:], row[:n]
                     for j in range(n):
                         d2[j] = w[3] * (nx[j] - r0[j])
-                    total += _tv_add(d2, acc, isotropic, coupled, C)
-                if isotropic:
-                    if coupled:
-                        for j in range(0, XC, C):
-                            s = acc[j]
-                            for c in range(1, C):
-                                s += acc[j + c]
-                            total += np.sqrt(s)
-                    else:
-                        for j in range(XC):
-                            total += np.sqrt(acc[j])
+                    total += tv_add_row(d2, acc, isotropic, coupled, C)
+                total += tv_row_norms(acc, isotropic, coupled, C)
         out[y] = total
 
 

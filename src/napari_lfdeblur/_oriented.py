@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 
 from . import _fused
@@ -82,8 +83,53 @@ class OrientedDifferences:
         _fused.call(getattr(_oriented_loops, loop), self._flat(t).numpy(), axis, *taps, alpha, self._flat(out).numpy())
         return True
 
+    def fused_available(self, t: torch.Tensor) -> bool:
+        """Whether :meth:`fused_prox` runs on ``t`` (a contiguous (V, U, Y, X[, C]) tensor on the CPU, with numba)."""
+        return t.dim() in (4, 5) and self._fused_args(t, 0) is not None
+
+    def fused_prox(self, v, dual, primal_weights, box, out, dual_weights=None, isotropic=True, coupled=False):
+        """The TV prox of :class:`~napari_lfdeblur._tv_solvers.TVProx` along the disparity, by the fused loops.
+
+        ``v`` (V, U, Y, X[, C]); ``dual``: the four components (v, u, y, x) of
+        ``v``'s shape, contiguous; ``primal_weights``: mu times the axis
+        weights; ``box`` None or ``(lo, hi)`` (``hi`` None: no upper bound).
+        With ``dual_weights`` (the step times the axis weights, 0 skips an
+        axis): one iteration of the dual gradient projection, in place on
+        ``dual``, ``out`` as scratch. Without: ``out = clip(v - sum_a w_a
+        D_a^T dual_a)``, the prox's result. Needs :meth:`fused_available`.
+        """
+        from . import _oriented_loops
+
+        X = v.shape[3]
+        flat = [self._flat(t).numpy() for t in (v, *dual, out)]
+        dt = flat[0].dtype.type
+        lo, hi = (dt(1.0), dt(0.0)) if box is None else (dt(box[0]), dt(np.inf if box[1] is None else box[1]))
+        taps = [a for axis in (0, 1) for a in self._fused_args(v, axis)]
+        wp = np.asarray(primal_weights, flat[0].dtype)
+        if dual_weights is None:
+            _fused.call(_oriented_loops.prox_primal, *flat[:5], X, *taps, wp, lo, hi, flat[5])
+            return
+        wd = np.asarray(dual_weights, flat[0].dtype)
+        _fused.call(_oriented_loops.prox_sweep, *flat[:5], X, *taps, wp, wd, lo, hi, bool(isotropic), bool(coupled),
+                    dt(1.0), flat[5])
+
+    def fused_tv(self, x: torch.Tensor, axis_weights, isotropic: bool, coupled: bool) -> float | None:
+        """The TV4 of ``x`` (V, U, Y, X[, C]) along the disparity by the fused loops (as ``_tv_solvers.tv_value``),
+        or None where they do not run (:meth:`fused_available`)."""
+        if not self.fused_available(x):
+            return None
+        from . import _oriented_loops
+
+        flat = self._flat(x).numpy()
+        taps = [a for axis in (0, 1) for a in self._fused_args(x, axis)]
+        out = np.empty(flat.shape[0] * flat.shape[1], np.float64)
+        _fused.call(_oriented_loops.tv_views, flat, x.shape[3], *taps, np.asarray(axis_weights, flat.dtype),
+                    bool(isotropic), bool(coupled), out)
+        return float(out.sum())
+
     def _flat(self, t: torch.Tensor) -> torch.Tensor:
-        V, U, Y, X, C = t.shape
+        """``t`` (V, U, Y, X[, C]) as (V, U, Y * X, C)."""
+        V, U, Y, X, C = t.shape if t.dim() == 5 else (*t.shape, 1)
         if (Y, X) != self.shape:
             raise ValueError(f"light field of views {Y}x{X}; the disparity map is {self.shape[0]}x{self.shape[1]}")
         return t.reshape(V, U, Y * X, C)

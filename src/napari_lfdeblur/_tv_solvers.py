@@ -36,6 +36,8 @@ def tv_value(x, isotropic, axis_weights, buffers=None, coupled=False, oriented=N
     """
     if oriented is None and x.dim() in (4, 5) and _fused.available(x.device, x.dtype):
         return _fused.tv_value(x, axis_weights, isotropic, coupled)
+    if oriented is not None and (value := oriented.fused_tv(x, axis_weights, isotropic, coupled)) is not None:
+        return value
     acc, diff_buf = buffers if buffers is not None else (torch.empty_like(x), torch.empty_like(x))
     if isotropic:
         acc.zero_()
@@ -116,7 +118,10 @@ class TVProx:
             bounds = (oriented.norm_bound(0), oriented.norm_bound(1), 4.0, 4.0)
             self.lip = max(sum(w * w * b for w, b in zip(axis_weights, bounds)), 1e-12)
         self.p = [torch.zeros_like(like) for _ in range(4)]
-        self.fused = oriented is None and like.dim() in (4, 5) and _fused.available(like.device, like.dtype)
+        if oriented is None:
+            self.fused = like.dim() in (4, 5) and _fused.available(like.device, like.dtype)
+        else:
+            self.fused = oriented.fused_available(like) and all(p.is_contiguous() for p in self.p)
         if self.fused:
             self.x = scratch[0] if scratch is not None else torch.empty_like(like)
             return
@@ -217,6 +222,12 @@ class TVProx:
         """The iterations and the result by the fused loops (:func:`~napari_lfdeblur._fused.prox_sweep`)."""
         wp = [mu * w for w in self.aw]
         wd = [step * w if v.shape[axis] > 1 else 0.0 for axis, w in enumerate(self.aw)]
+        if self.oriented is not None:
+            for _ in range(self.n_inner):
+                self.oriented.fused_prox(v, self.p, wp, self.box, self.x, wd, self.isotropic, self.coupled)
+                check_cancelled()
+            self.oriented.fused_prox(v, self.p, wp, self.box, out)
+            return out
         blocks = 4 * torch.get_num_threads()
         for _ in range(self.n_inner):
             _fused.prox_sweep(v, self.p, wp, wd, self.box, self.isotropic, self.coupled, blocks, self.x)
