@@ -1,16 +1,16 @@
 """The TV's angular differences: along the scene's disparity or along the view axes, with the true path.
 
 ``deconvolve`` (``method='tv'``) charges the differences between
-neighbouring views. ``angular='views'`` (the default) compares the same
-pixel of two views, which also charges the parallax of every textured point
-off the plane of zero disparity; ``angular='disparity'`` compares the
+neighbouring views. ``angular='views'`` compares the same pixel of two
+views, which also charges the parallax of every textured point off the
+plane of zero disparity; ``angular='disparity'`` (the default) compares the
 samples that a Lambertian scene makes equal (docs/deconvolution.md,
 *Angular differences*). This script restores every case of the development
 split of ``blind_eval.py`` with its **true** path, non-blind, with four
 priors at the default weight rule (``weight=None``): the two kinds of
 angular differences, each with the isotropic and the anisotropic TV (the
-default is the isotropic TV along the views; ``lfdeblur deconvolve
---along-disparity`` is the anisotropic TV along the disparity). It reports
+default is the anisotropic TV along the disparity; ``lfdeblur deconvolve
+--along-views`` is the isotropic TV along the views). It reports
 the mean PSNR gain over the blurred input by group, the smallest gain, and
 the time per light field.
 
@@ -33,9 +33,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _report  # noqa: E402  (benchmarks/_report.py)
 import blind_eval as ev  # noqa: E402  (benchmarks/blind_eval.py)
 
-#: (label, angular, isotropic) of the priors compared: the first is the default, the last ``--along-disparity``
-PRIORS = (("views, isotropic (default)", "views", True), ("views, anisotropic", "views", False),
-          ("disparity, isotropic", "disparity", True), ("disparity, anisotropic", "disparity", False))
+#: (label, angular, isotropic) of the priors compared: the first is ``--along-views``, the last the default
+PRIORS = (("views, isotropic", "views", True), ("views, anisotropic", "views", False),
+          ("disparity, isotropic", "disparity", True), ("disparity, anisotropic (default)", "disparity", False))
 
 
 def restore_all(case, n_times: int) -> dict:
@@ -61,7 +61,7 @@ def summary(rows: list[dict]) -> list[str]:
     """The table: per group and prior, the mean and smallest gain and the mean and largest time."""
     groups = ["all"] + [g for g in ev.eval_set.GROUPS if any(r["group"] == g for r in rows)]
     lines = ["| group | cases | " + " | ".join(f"{label}: gain dB (worst)" for label, _, _ in PRIORS)
-             + " | time s (mean, max): default / disparity, anisotropic |",
+             + " | time s (mean, max): views, isotropic / disparity, anisotropic (default) |",
              "|---|---|" + "---|" * (len(PRIORS) + 1)]
     for g in groups:
         sel = [r for r in rows if g == "all" or r["group"] == g]

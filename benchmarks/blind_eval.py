@@ -17,8 +17,9 @@ Methods
   ``d_inf``, ``T = 32`` and default parameters: the target a blind method can approach;
 - ``baseline2d``: every view deblurred on its own by the L0-gradient 2D blind deconvolution of
   ``benchmarks/_baseline2d.py`` (no path estimate);
-- ``disparity`` and ``truepath_disparity``: ``default`` and ``truepath`` with the final solve's TV
-  anisotropic and its angular differences along the scene's disparity (``DISPARITY_TV``).
+- ``views`` and ``truepath_views``: ``default`` and ``truepath`` with the final solve's TV isotropic
+  and its angular differences between the same pixel of neighbouring views (``VIEWS_TV``; the
+  default TV is anisotropic, along the scene's disparity).
 
 Metrics (``napari_lfdeblur.metrics``), spatial borders of ``CROP`` px removed: PSNR and its gain
 over the blurred input, SSIM, angular error, and for path estimates the blur mismatch, Chamfer
@@ -61,9 +62,9 @@ SOLVE_TIMES = 32  # instants of the truepath method's model
 CROP = 8  # border pixels removed before PSNR / SSIM / angular error
 PATH_TIMES = 64  # instants for the path errors
 DEFAULT_METHODS = ("default", "paper", "truepath")
-ALL_METHODS = ("default", "strict", "paper", "truepath", "baseline2d", "disparity", "truepath_disparity")
-#: the final solve of the methods ``disparity`` and ``truepath_disparity`` (lfdeblur deconvolve --along-disparity)
-DISPARITY_TV = {"angular": "disparity", "isotropic": False}
+ALL_METHODS = ("default", "strict", "paper", "truepath", "baseline2d", "views", "truepath_views")
+#: the final solve of the methods ``views`` and ``truepath_views`` (lfdeblur deconvolve --along-views)
+VIEWS_TV = {"angular": "views", "isotropic": True}
 #: ``strict``: the default preset returning the input wherever the salient-edge test finds little blur
 STRICT_LIGHT_RESTORATION = 0.0
 INPUT = "input (blurred)"
@@ -229,12 +230,12 @@ def _blind_params(blind, preset: str):
 
 
 def method_available(method: str) -> tuple[bool, str]:
-    if method in ("baseline2d", "truepath", "truepath_disparity"):
+    if method in ("baseline2d", "truepath", "truepath_views"):
         return True, ""
     try:
         from napari_lfdeblur import blind
 
-        _blind_params(blind, "default" if method in ("strict", "disparity") else method)
+        _blind_params(blind, "default" if method in ("strict", "views") else method)
         getattr(blind, "blind_deblur")
     except Exception as exc:  # noqa: BLE001 - any failure means "not available"
         return False, f"napari_lfdeblur.blind not usable: {type(exc).__name__}: {exc}"
@@ -249,21 +250,21 @@ def run_method(method: str, case: Case, device: str, quick: bool):
         params = Baseline2DParams(kernel_size=7) if quick else Baseline2DParams()
         restored, _ = deblur_views_2d(case.blurred, params)
         return restored, None, {}
-    if method in ("truepath", "truepath_disparity"):
+    if method in ("truepath", "truepath_views"):
         from napari_lfdeblur import deconvolve
         from napari_lfdeblur.path import center_path
 
         cp = center_path(case.control_points, SOLVE_TIMES)
         restored = deconvolve(case.blurred, cp, n_times=SOLVE_TIMES, infinity_disparity=case.infinity_disparity,
-                              device=device, **(DISPARITY_TV if method == "truepath_disparity" else {}))
+                              device=device, **(VIEWS_TV if method == "truepath_views" else {}))
         return restored, None, {}
     from napari_lfdeblur import blind
 
-    params = _blind_params(blind, "default" if method in ("strict", "disparity") else method)
+    params = _blind_params(blind, "default" if method in ("strict", "views") else method)
     if method == "strict":
         params = params.replace(light_restoration=STRICT_LIGHT_RESTORATION)
-    if method == "disparity":
-        params = params.replace(final=DISPARITY_TV)
+    if method == "views":
+        params = params.replace(final=VIEWS_TV)
     res = blind.blind_deblur(case.blurred, infinity_disparity=case.infinity_disparity, params=params,
                              device=device, seed=0)
     info = {}
@@ -467,7 +468,7 @@ def targets(means: list[dict], quick: bool) -> list[str]:
     def check(ok, text):
         lines.append(f"- {'met' if ok else '**not met**'}: {text}")
 
-    for method in ("default", "strict", "paper", "disparity"):
+    for method in ("default", "strict", "paper", "views"):
         if (("all", method)) not in by:
             continue
         for group in ("all", "d_inf ≠ 0", "Illum"):
@@ -541,10 +542,10 @@ METHOD_TEXT = """\
   wherever the salient-edge test finds little blur (no light restoration). `truepath`: non-blind
   `deconvolve` with the true path (zero-mean gauge for T = 32), the true `d_inf`, T = 32 and default
   parameters. `baseline2d`: each view deblurred on its own by a compact L0-gradient 2D blind
-  deconvolution (`benchmarks/_baseline2d.py`). `disparity`, `truepath_disparity`: `default` and
-  `truepath` with the final solve's TV anisotropic and its angular differences along the scene's
-  disparity (`deconvolve(angular="disparity", isotropic=False)`, docs/deconvolution.md, *Angular
-  differences*).
+  deconvolution (`benchmarks/_baseline2d.py`). `views`, `truepath_views`: `default` and `truepath`
+  with the final solve's TV isotropic and its angular differences between the same pixel of
+  neighbouring views (`deconvolve(angular="views", isotropic=True)`; the default TV is anisotropic,
+  along the scene's disparity: docs/deconvolution.md, *Angular differences*).
 - **Image metrics** (`napari_lfdeblur.metrics`), {crop} border pixels cropped in y and x: PSNR over
   all views and channels, and the gain over the blurred input's; the worst gain is the smallest over
   the group's cases; SSIM (mean over views and channels); angular error (RMSE of the differences

@@ -4,8 +4,9 @@
 * sigma``, ``sigma`` from ``estimate_noise_sigma`` on the blurred input, for
 every channel with its own TV, ``COLOUR_WEIGHT_FACTOR * sigma`` for the colour
 TV (``couple_channels``), and ``ANISOTROPIC_WEIGHT_SCALE`` times that for the
-anisotropic TV, here the colour TV along the scene's disparity
-(``angular='disparity', isotropic=False``). This script checks the rule on cases of its own, not
+anisotropic TV, here the default, the colour TV along the scene's disparity
+(``angular='disparity', isotropic=False``; the other two priors are the
+isotropic TV along the views). This script checks the rule on cases of its own, not
 the evaluation set of ``blind_eval.py``: the package's ``synthetic_scene``
 (piecewise-constant textures, random colours) and ``procedural_scene``
 (natural textures), two seeds each, blurred by random paths with ``p_z !=
@@ -49,9 +50,11 @@ import _report  # noqa: E402  (benchmarks/_report.py)
 FACTORS = (0.1, 0.15, 0.2, 0.3, 0.45, 0.7)
 NOISES = (0.002, 0.01, 0.02)
 SCENES = (("synthetic", 0), ("synthetic", 1), ("procedural", 0), ("procedural", 1))
-#: the priors (``deconvolve``'s options): every channel with its own TV, the colour TV (``couple_channels``), and
-#: the anisotropic colour TV along the scene's disparity (``lfdeblur deconvolve --along-disparity``)
-PRIORS = {"separate": {"couple_channels": False}, "colour": {"couple_channels": True},
+#: the priors (``deconvolve``'s options): the isotropic TV along the views (``lfdeblur deconvolve
+#: --along-views``) of every channel on its own and over the channels (``couple_channels``), and the default,
+#: the anisotropic colour TV along the scene's disparity
+VIEWS = {"angular": "views", "isotropic": True}
+PRIORS = {"separate": {"couple_channels": False, **VIEWS}, "colour": {"couple_channels": True, **VIEWS},
           "disparity": {"couple_channels": True, "angular": "disparity", "isotropic": False}}
 #: the default rule's factor of each prior, in units of its isotropic rule (an anisotropic prior's weight is
 #: ``ANISOTROPIC_WEIGHT_SCALE`` times that: ``factor * ANISOTROPIC_WEIGHT_SCALE * sigma``)
@@ -78,7 +81,7 @@ def run_case(lf, cp, blurred, d_inf, factors, options):
     """The PSNR gain over the input at each factor, with one prior (``deconvolve``'s ``options``)."""
     sigma = estimate_noise_sigma(blurred)
     base = psnr(blurred, lf, crop=CROP)
-    scale = 1.0 if options.get("isotropic", True) else ANISOTROPIC_WEIGHT_SCALE
+    scale = 1.0 if options["isotropic"] else ANISOTROPIC_WEIGHT_SCALE
     gains = []
     for f in factors:
         out = deconvolve(blurred, cp, n_times=N_TIMES, infinity_disparity=d_inf, weight=f * scale * sigma,
@@ -123,8 +126,9 @@ def main(argv=None) -> None:
         f"{', '.join(f'{k} seed {s}' for k, s in SCENES)}; random paths "
         f"of 3 control points (extent 2 views, `p_z` extent 1), T = {N_TIMES}; Gaussian noise; the non-blind "
         f"TV solve (`deconvolve`, default iterations and stopping) with the true path and the weight "
-        f"`factor * sigma`, `sigma` estimated in the blurred input (`estimate_noise_sigma`), with every "
-        f"channel's own TV (`separate`), with the colour TV (`colour`, `couple_channels=True`) and with the "
+        f"`factor * sigma`, `sigma` estimated in the blurred input (`estimate_noise_sigma`), with the "
+        f"isotropic TV along the views (`angular='views', isotropic=True`) of every channel on its own "
+        f"(`separate`) and over the channels (`colour`, `couple_channels=True`), and with the default, the "
         f"anisotropic colour TV along the scene's disparity (`disparity`, `angular='disparity', "
         f"isotropic=False`), whose weight is `factor * {ANISOTROPIC_WEIGHT_SCALE} * sigma` "
         f"(`ANISOTROPIC_WEIGHT_SCALE`). Gains are "

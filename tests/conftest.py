@@ -40,10 +40,17 @@ def engine(request, monkeypatch):
 def wrap_prox_inner_iteration(monkeypatch, wrapper):
     """Replaces what each inner iteration of the TV prox calls once by ``wrapper(real, *args, **kwargs)``.
 
-    That is the fused sweep where the fused loops run, the torch version's dual projection otherwise.
+    That is the fused sweep where the fused loops run (the TV along the views' or along the disparity's), the torch
+    version's dual projection otherwise.
     """
     from napari_lfdeblur import _fused, _tv_solvers
 
-    module, name = (_fused, "prox_sweep") if _fused.available("cpu") else (_tv_solvers, "project_tv_dual")
-    real = getattr(module, name)
-    monkeypatch.setattr(module, name, lambda *args, **kwargs: wrapper(real, *args, **kwargs))
+    if _fused.available("cpu"):
+        from napari_lfdeblur import _oriented_loops
+
+        targets = [(_fused, "prox_sweep"), (_oriented_loops, "prox_sweep")]
+    else:
+        targets = [(_tv_solvers, "project_tv_dual")]
+    for module, name in targets:
+        real = getattr(module, name)
+        monkeypatch.setattr(module, name, lambda *args, real=real, **kwargs: wrapper(real, *args, **kwargs))

@@ -151,14 +151,15 @@ def test_the_final_stage_reports_its_weight_which_reproduces_the_result(linear_c
     np.testing.assert_allclose(again, res.lightfield, atol=1e-5)
 
 
-def test_the_final_stage_takes_the_tv_along_the_disparity(linear_case, linear_result):
+def test_the_final_stage_takes_the_tv_along_the_views(linear_case, linear_result):
     from napari_lfdeblur.deconvolution import deconvolve
 
     _, _, blurred = linear_case
-    params = linear_result.params.replace(final={"angular": "disparity", "isotropic": False})
+    assert linear_result.params.final.angular == "disparity" and not linear_result.params.final.isotropic
+    params = linear_result.params.replace(final={"angular": "views", "isotropic": True})
     res = blind_deblur(blurred, params=params, device="cpu")
     np.testing.assert_array_equal(res.control_points, linear_result.control_points)  # the same path stage
-    assert res.info["final_weight"] == pytest.approx(0.5 * linear_result.info["final_weight"])  # the anisotropic rule
+    assert res.info["final_weight"] == pytest.approx(2 * linear_result.info["final_weight"])  # the isotropic rule
     again = deconvolve(blurred, res.control_points, n_times=params.final_n_times, device="cpu",
                        params=params.final.replace(weight=res.info["final_weight"]))
     np.testing.assert_allclose(again, res.lightfield, atol=1e-5)

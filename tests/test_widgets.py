@@ -294,7 +294,7 @@ def test_deconvolve_boxes_reach_the_solver(box, make_napari_viewer, qtbot, notif
     assert not np.allclose(*results)  # the box changes the result
 
 
-def test_deconvolve_tv_along_disparity_reaches_the_solver(make_napari_viewer, qtbot, lf, notifications):
+def test_deconvolve_tv_along_the_views_reaches_the_solver(make_napari_viewer, qtbot, lf, notifications):
     from napari_lfdeblur._napari.widgets.deconvolve import DeconvolveWidget
     from napari_lfdeblur.deconvolution import deconvolve
 
@@ -307,17 +307,17 @@ def test_deconvolve_tv_along_disparity_reaches_the_solver(make_napari_viewer, qt
     w.table.set_control_points(cp)
     w.form.n_times.value = 6
     w.form.n_iter.value = 4
-    assert not w.form.along_disparity.value  # off by default
-    w.form.along_disparity.value = True
+    assert w.form.along_disparity.value  # on by default: the TV along the disparity
+    w.form.along_disparity.value = False
     w.run()
     _wait_done(qtbot, w)
     assert not [n for n in notifications if n[0] == "error"], notifications
     out = viewer.layers["b deconvolved"]
-    want = deconvolve(blurred, cp, n_times=6, n_iter=4, angular="disparity", isotropic=False)
+    want = deconvolve(blurred, cp, n_times=6, n_iter=4, angular="views", isotropic=True)
     np.testing.assert_allclose(out.data, want, atol=1e-5)
     assert not np.allclose(want, deconvolve(blurred, cp, n_times=6, n_iter=4))
     params = out.metadata["parameters"]
-    assert params["angular"] == "disparity" and params["isotropic"] is False and "along_disparity" not in params
+    assert params["angular"] == "views" and params["isotropic"] is True and "along_disparity" not in params
 
 
 def test_deconvolve_solver_error_is_a_notification(make_napari_viewer, qtbot, lf, notifications):

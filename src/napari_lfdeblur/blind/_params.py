@@ -117,8 +117,7 @@ class PathFitParams(JsonParams):
         blurs the parts of the view differently, so windows far apart
         constrain ``p_z`` (and the path as a whole) better than one window
         of as many pixels. Each window costs the path stage about as much
-        as the first. The ``'6dof'`` motion and the ``'joint'`` method use
-        one window.
+        as the first. ``'6dof'`` motion and the ``'joint'`` method use one.
     n_levels : int
         Spatial pyramid levels (1 = full resolution only). Levels smaller
         than ``min_size`` px are skipped.
@@ -351,8 +350,9 @@ class BlindParams(JsonParams):
         The joint Adam (``'joint'``).
     final : DeconvolutionParams or None
         The final non-blind solve of every colour channel with the path
-        found (see :func:`~napari_lfdeblur.deconvolution.deconvolve`); None
-        skips it and returns the blurred input as the light field.
+        found (see :func:`~napari_lfdeblur.deconvolution.deconvolve`; by
+        default its TV along the scene's disparity); None skips it and
+        returns the blurred input as the light field.
     require_evidence : bool
         Restore only when the data give evidence of a significant blur
         (docs/blind.md, "What makes it robust"); otherwise return a light
@@ -402,8 +402,7 @@ class BlindParams(JsonParams):
                 raise TypeError(f"BlindParams.{name} must be a {cls.__name__} (or, in replace() and from_dict(), "
                                 f"a dict of its fields); got {type(getattr(self, name)).__name__}")
         if self.final is not None and not isinstance(self.final, DeconvolutionParams):
-            raise TypeError(f"BlindParams.final must be a DeconvolutionParams or None; got "
-                            f"{type(self.final).__name__}")
+            raise TypeError(f"BlindParams.final must be a DeconvolutionParams or None; got {type(self.final).__name__}")
 
     def path_box(self, V: int, U: int) -> float:
         """The bound of the estimated control points for ``V x U`` views, views: ``max_extent``, or
@@ -431,7 +430,8 @@ PRESETS = {
         method="joint", n_control_points=4, n_times=7, final_n_times=7,
         joint=JointParams(n_iter=1000, lr=1.0, lf_lr=0.04, prior_weight=8e-3, prior_decay=0.997, prior_floor=0.1,
                           eps=0.12, eps_decay=0.997, eps_min=0.04),
-        final=DeconvolutionParams(method="tv", weight=0.004, n_iter=100, tol=0.0, couple_channels=False),
+        final=DeconvolutionParams(method="tv", weight=0.004, n_iter=100, tol=0.0, couple_channels=False,
+                                  isotropic=True, angular="views"),
         light_restoration=0.0,
     ),
 }
