@@ -100,8 +100,10 @@ class TVProx:
     whole-field buffer, the first of ``scratch`` when given).
 
     ``oriented``: an :class:`~napari_lfdeblur._oriented.OrientedDifferences`
-    whose angular differences replace those along the view axes (then the
-    torch iteration, over the whole field at once: ``rows`` is unused).
+    whose angular differences replace those along the view axes. Its
+    iteration is :meth:`~napari_lfdeblur._oriented.OrientedDifferences.fused_prox`
+    where the fused loops run, else the torch one over the whole field at
+    once (``rows`` is unused either way).
     """
 
     def __init__(self, like: torch.Tensor, n_inner: int, isotropic: bool, axis_weights, box, scratch=None,

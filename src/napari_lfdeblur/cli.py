@@ -374,8 +374,8 @@ def _add_deconvolve(sub):
                    help="tv (default: 4D total variation, any path and d_inf), inplane (the exact angular "
                         "solve, p_z = 0 and d_inf = 0 only) or auto (the same as tv)")
     p.add_argument("--weight", type=float, default=None,
-                   help="regularisation weight >= 0 (default: tv, 0.45 x the noise level estimated in the data "
-                        "for the colour TV, 0.3 x for one TV per channel; inplane, 2e-3)")
+                   help="regularisation weight >= 0 (default: tv, 0.225 x the noise level estimated in the data for "
+                        "the colour TV, 0.15 x for one TV per channel, twice that --along-views; inplane, 2e-3)")
     p.add_argument("--separate-channels", action="store_true",
                    help="tv on colour: one TV per channel instead of one colour TV over the channels (about a "
                         "third of the memory; for channels whose edges are unrelated)")
@@ -385,7 +385,7 @@ def _add_deconvolve(sub):
     p.add_argument("--along-views", action="store_true",
                    help="tv: the isotropic TV whose angular differences compare the same pixel of neighbouring "
                         "views (default: the anisotropic TV along the scene's disparity, estimated from the input, "
-                        "which restores better in about twice the time; docs/deconvolution.md)")
+                        "which restores better in two to three times the time; docs/deconvolution.md)")
     p.add_argument("--iterations", type=int, default=200, help="maximum TV iterations (default 200)")
     p.add_argument("--tol", type=float, default=1e-4,
                    help="TV stops when the objective falls by less than this fraction in an iteration (default 1e-4)")

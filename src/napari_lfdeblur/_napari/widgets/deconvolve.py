@@ -50,7 +50,7 @@ __all__ = ["DeconvolveWidget"]
 
 def _fields() -> list:
     """The solver fields of the form, named as ``iter_deconvolve``'s keyword arguments."""
-    from ...deconvolution import COLOUR_WEIGHT_FACTOR, METHODS, NOISE_WEIGHT_FACTOR
+    from ...deconvolution import ANISOTROPIC_WEIGHT_SCALE, COLOUR_WEIGHT_FACTOR, METHODS, NOISE_WEIGHT_FACTOR
 
     return [
         spin("n_times", 32, 2, 1024, label="instants T", tooltip="exposure instants T of the blur model"),
@@ -65,8 +65,8 @@ def _fields() -> list:
         CheckBox(name="along_disparity", value=True, label="TV along disparity",
                  tooltip="tv: the anisotropic TV whose angular differences follow the scene's disparity (estimated "
                          "from the data), which charges noise and ringing but not the scene's parallax (the "
-                         "default); untick for the isotropic TV between the same pixel of neighbouring views, "
-                         "about twice as fast, which restores less well (its weight from the noise is twice this "
+                         "default); untick for the isotropic TV between the same pixel of neighbouring views, two "
+                         "to three times as fast, which restores less well (its weight from the noise is twice this "
                          "one's)"),
         CheckBox(name="saturation", value=True, label="saturated samples",
                  tooltip="tv: samples at 1 are taken as clipped by the sensor (the light there reached at least "
@@ -74,8 +74,8 @@ def _fields() -> list:
                          "(the default); untick to fit them as they are"),
         CheckBox(name="noise_weight", value=True, label="weight from noise",
                  tooltip=f"TV weight = {COLOUR_WEIGHT_FACTOR} x (colour TV) or {NOISE_WEIGHT_FACTOR} x (one TV per "
-                         "channel) the noise level estimated in the data (inplane: 2e-3); untick to set the "
-                         "weight yourself"),
+                         f"channel) the noise level estimated in the data, times {ANISOTROPIC_WEIGHT_SCALE} along the "
+                         "disparity (inplane: 2e-3); untick to set the weight yourself"),
         fspin("weight", 2e-3, 0.0, 10.0, 1e-5, tooltip="regularisation weight (TV or angular Tikhonov)"),
         spin("n_iter", 100, 1, 100000, label="iterations", tooltip="maximum iterations of the TV solver"),
         device_choice(),
