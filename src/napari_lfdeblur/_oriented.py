@@ -48,7 +48,9 @@ class OrientedDifferences:
     -----
     Light fields are ``(V, U, Y, X, C)`` tensors. ``D_a`` is linear with
     adjoint :meth:`add_adjoint`; :meth:`norm_bound` bounds ``||D_a||^2``
-    for the step of a dual method.
+    for the step of a dual method. On the CPU, the TV prox and the TV along
+    the disparity run as compiled loops (:meth:`fused_prox`,
+    :meth:`fused_tv`).
     """
 
     def __init__(self, disparity: torch.Tensor):
@@ -71,17 +73,6 @@ class OrientedDifferences:
         if t.dtype not in self._numpy:
             self._numpy[t.dtype] = [(i0.numpy(), i1.numpy(), w.to(t.dtype).numpy()) for i0, i1, w in self.taps]
         return self._numpy[t.dtype][axis]
-
-    def _fused(self, loop: str, t: torch.Tensor, axis: int, out: torch.Tensor, alpha: float) -> bool:
-        """Run ``loop`` of :mod:`~napari_lfdeblur._oriented_loops` on ``t`` into ``out`` where the fused loops can
-        (the CPU, contiguous tensors); whether it ran."""
-        taps = self._fused_args(t, axis) if out.is_contiguous() else None
-        if taps is None:
-            return False
-        from . import _oriented_loops
-
-        _fused.call(getattr(_oriented_loops, loop), self._flat(t).numpy(), axis, *taps, alpha, self._flat(out).numpy())
-        return True
 
     def fused_available(self, t: torch.Tensor) -> bool:
         """Whether :meth:`fused_prox` runs on ``t`` (a contiguous (V, U, Y, X[, C]) tensor on the CPU, with numba)."""
@@ -160,7 +151,7 @@ class OrientedDifferences:
     def add_difference(self, x: torch.Tensor, axis: int, out: torch.Tensor, alpha: float = 1.0) -> torch.Tensor:
         """``out += alpha D_axis x`` (``out`` of ``x``'s shape); returns ``out``."""
         n = x.shape[axis]
-        if n < 2 or alpha == 0 or self._fused("difference_add", x, axis, out, alpha):
+        if n < 2 or alpha == 0:
             return out
         d = self.shift(x.narrow(axis, 1, n - 1), axis).sub_(x.narrow(axis, 0, n - 1))
         out.narrow(axis, 0, n - 1).add_(d, alpha=alpha)
@@ -169,7 +160,7 @@ class OrientedDifferences:
     def add_adjoint(self, g: torch.Tensor, axis: int, out: torch.Tensor, alpha: float = 1.0) -> torch.Tensor:
         """``out += alpha D_axis^T g`` (``g`` of ``D_axis``'s output shape; its last view is ignored)."""
         n = g.shape[axis]
-        if n < 2 or alpha == 0 or self._fused("adjoint_add", g, axis, out, alpha):
+        if n < 2 or alpha == 0:
             return out
         head = g.narrow(axis, 0, n - 1)
         out.narrow(axis, 0, n - 1).sub_(head, alpha=alpha)

@@ -3,7 +3,7 @@
 Light fields are held as ``(V, U, N, C)`` arrays, ``N = Y * X`` the flat
 pixels of a view; the shift along the disparity samples pixel ``j`` of the
 next view at ``(1 - w[j]) * [i0[j]] + w[j] * [i1[j]]``. Each parallel step
-owns one view of ``out``, so no two threads write the same sample.
+owns one view of what it writes, so no two threads write the same sample.
 """
 
 import numba
@@ -11,57 +11,15 @@ import numpy as np
 
 from ._tv_loops import project_dual_row, tv_add_row, tv_row_norms
 
-__all__ = ["difference_add", "adjoint_add", "prox_sweep", "prox_primal", "tv_views"]
+__all__ = ["prox_sweep", "prox_primal", "tv_views"]
 
 _jit = numba.njit(parallel=True, cache=True, fastmath={"contract", "reassoc"}, nogil=True)
 prange = numba.prange
 
 
-@_jit
-def difference_add(x, axis, i0, i1, w, alpha, out):
-    """``out[v, u] += alpha * (S x[next view] - x[v, u])`` for every view but the last along ``axis`` (0: v, 1: u)."""
-    V, U, N, C = x.shape
-    for k in prange(V * U):
-        v, u = k // U, k % U
-        if (axis == 0 and v == V - 1) or (axis == 1 and u == U - 1):
-            continue
-        src = x[v + 1, u] if axis == 0 else x[v, u + 1]
-        cur, dst = x[v, u], out[v, u]
-        for j in range(N):
-            a, b, ww = i0[j], i1[j], w[j]
-            for c in range(C):
-                dst[j, c] += alpha * ((1 - ww) * src[a, c] + ww * src[b, c] - cur[j, c])
-
-
-@_jit
-def adjoint_add(g, axis, i0, i1, w, alpha, out):
-    """``out += alpha * D^T g`` for :func:`difference_add`'s ``D``, gathered per view of ``out``.
-
-    View ``(v, u)`` of ``out`` receives ``-g[v, u]`` (unless it is the last
-    along ``axis``) and the transposed shift of ``g`` at the view before it.
-    """
-    V, U, N, C = g.shape
-    for k in prange(V * U):
-        v, u = k // U, k % U
-        dst = out[v, u]
-        if not ((axis == 0 and v == V - 1) or (axis == 1 and u == U - 1)):
-            cur = g[v, u]
-            for j in range(N):
-                for c in range(C):
-                    dst[j, c] -= alpha * cur[j, c]
-        if (axis == 0 and v == 0) or (axis == 1 and u == 0):
-            continue
-        prev = g[v - 1, u] if axis == 0 else g[v, u - 1]
-        for j in range(N):
-            a, b, ww = i0[j], i1[j], w[j]
-            for c in range(C):
-                dst[a, c] += alpha * (1 - ww) * prev[j, c]
-                dst[b, c] += alpha * ww * prev[j, c]
-
-
 # The TV prox along the disparity (as _tv_solvers.TVProx with ``oriented``): light fields (V, U, N, C) with
-# ``N = Y * X``; the dual's components p0 (v), p1 (u), p2 (y), p3 (x) of that shape; ``t0``, ``t1`` the taps
-# ``(i0, i1, w)`` of the shifts along y (for v) and along x (for u). A component's last index along its axis
+# ``N = Y * X``; the dual's components p0 (v), p1 (u), p2 (y), p3 (x) of that shape; ``(i00, i01, w0)`` and
+# ``(i10, i11, w1)`` the taps of the shifts along y (for v) and along x (for u). A component's last index along its axis
 # is never written (it stays 0). ``wp``: mu times the axis weights; ``wd``: the dual step times them (0 skips
 # an axis); ``lo > hi``: no box.
 
