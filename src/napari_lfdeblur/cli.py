@@ -375,7 +375,7 @@ def _add_deconvolve(sub):
                         "solve, p_z = 0 and d_inf = 0 only) or auto (the same as tv)")
     p.add_argument("--weight", type=float, default=None,
                    help="regularisation weight >= 0 (default: tv, 0.225 x the noise level estimated in the data for "
-                        "the colour TV, 0.15 x for one TV per channel, twice that --along-views; inplane, 2e-3)")
+                        "the colour TV, 0.15 x for one TV per channel, x2 with --along-views; inplane, 2e-3)")
     p.add_argument("--separate-channels", action="store_true",
                    help="tv on colour: one TV per channel instead of one colour TV over the channels (about a "
                         "third of the memory; for channels whose edges are unrelated)")
