@@ -152,3 +152,12 @@ def test_bad_angular_and_disparity_map():
     od = OrientedDifferences(torch.zeros(4, 5))
     with pytest.raises(ValueError, match="views 5x5; the disparity map is 4x5"):
         od.difference(torch.zeros(2, 2, 5, 5, 1), 0)
+    # the fused prox writes through numpy: a strided output would be a copy, its result lost
+    from napari_lfdeblur import _fused
+
+    if _fused.available("cpu"):
+        v = torch.zeros(2, 2, 4, 5, 1)
+        dual = [torch.zeros_like(v) for _ in range(4)]
+        strided = torch.zeros(2, 2, 5, 4, 1).transpose(2, 3)
+        with pytest.raises(ValueError, match="contiguous"):
+            od.fused_prox(v, dual, [0.1] * 4, None, strided)

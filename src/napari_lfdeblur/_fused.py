@@ -45,8 +45,9 @@ import warnings
 import numpy as np
 import torch
 
-__all__ = ["available", "call", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad", "FusedTaps",
-           "prox_sweep", "prox_primal", "tv_value", "view_variance", "add_laplacian", "tile_accumulate", "tile_shift_grads"]
+__all__ = ["available", "call", "check_writable", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad",
+           "FusedTaps", "prox_sweep", "prox_primal", "tv_value", "view_variance", "add_laplacian", "tile_accumulate",
+           "tile_shift_grads"]
 
 _LOCK = threading.Lock()  # numba's default thread pool runs one parallel loop at a time
 
@@ -84,7 +85,7 @@ def call(loop, *args):
         loop(*args)
 
 
-def _check_writable(t: torch.Tensor) -> None:
+def check_writable(t: torch.Tensor) -> None:
     """The loops write into ``t`` through numpy: it must be contiguous (a copy would lose what they write)."""
     if not t.is_contiguous():
         raise ValueError("the fused loops write into contiguous tensors only")
@@ -96,7 +97,7 @@ def rows(t: torch.Tensor, out: bool = False) -> np.ndarray:
     An ``out`` tensor, which the loops write, must be contiguous (a copy would lose what they write).
     """
     if out:
-        _check_writable(t)
+        check_writable(t)
     V, U, Y, X, C = t.shape
     return t.detach().contiguous().numpy().reshape(V, U, Y, X * C)
 
@@ -129,7 +130,7 @@ def add_adjoint(G, K, offsets, spans, out, origin=(0, 0), view_step=1):
 
 def kernel_grad(L, G, offsets, out, origin=(0, 0), view_step=1):
     """Writes ``d<G, forward(L)>/dK`` into ``out`` (S, h, w), contiguous, of ``G``'s dtype."""
-    _check_writable(out)
+    check_writable(out)
     _run("kernel_grad", rows(L.to(G.dtype)), rows(G), offsets, *origin, view_step, G.shape[4], out.numpy())
 
 

@@ -74,6 +74,10 @@ class OrientedDifferences:
             self._numpy[t.dtype] = [(i0.numpy(), i1.numpy(), w.to(t.dtype).numpy()) for i0, i1, w in self.taps]
         return self._numpy[t.dtype][axis]
 
+    def _fused_taps(self, t: torch.Tensor) -> list:
+        """``[i0, i1, w]`` of the v axis then of the u axis, as :meth:`_fused_args` gives them, in one list."""
+        return [a for axis in (0, 1) for a in self._fused_args(t, axis)]
+
     def fused_available(self, t: torch.Tensor) -> bool:
         """Whether :meth:`fused_prox` runs on ``t`` (a contiguous (V, U, Y, X[, C]) tensor on the CPU, with numba)."""
         return t.dim() in (4, 5) and self._fused_args(t, 0) is not None
@@ -92,10 +96,12 @@ class OrientedDifferences:
         from . import _oriented_loops
 
         X = v.shape[3]
+        for t in (*dual, out):  # written through numpy
+            _fused.check_writable(t)
         flat = [self._flat(t).numpy() for t in (v, *dual, out)]
         dt = flat[0].dtype.type
         lo, hi = (dt(1.0), dt(0.0)) if box is None else (dt(box[0]), dt(np.inf if box[1] is None else box[1]))
-        taps = [a for axis in (0, 1) for a in self._fused_args(v, axis)]
+        taps = self._fused_taps(v)
         wp = np.asarray(primal_weights, flat[0].dtype)
         if dual_weights is None:
             _fused.call(_oriented_loops.prox_primal, *flat[:5], X, *taps, wp, lo, hi, flat[5])
@@ -112,7 +118,7 @@ class OrientedDifferences:
         from . import _oriented_loops
 
         flat = self._flat(x).numpy()
-        taps = [a for axis in (0, 1) for a in self._fused_args(x, axis)]
+        taps = self._fused_taps(x)
         out = np.empty(flat.shape[0] * flat.shape[1], np.float64)
         _fused.call(_oriented_loops.tv_views, flat, x.shape[3], *taps, np.asarray(axis_weights, flat.dtype),
                     bool(isotropic), bool(coupled), out)
