@@ -404,6 +404,8 @@ def test_saturation_changes_nothing_below_the_ceiling():
 @pytest.mark.parametrize("shape, isotropic, coupled, box", [
     ((3, 4, 7, 5, 2), True, True, (0.0, 1.0)),
     ((3, 4, 7, 5, 2), False, True, None),
+    ((3, 4, 7, 5, 3), True, True, None),  # three channels: loops of their own
+    ((3, 4, 7, 5, 3), False, True, (0.0, 1.0)),
     ((2, 3, 9, 6), True, False, None),
     ((3, 3, 8, 5), False, False, (0.0, 1.0)),
     ((3, 2, 1, 5), True, False, None),

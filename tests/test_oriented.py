@@ -85,9 +85,10 @@ def test_scene_disparity_finds_a_plane():
 
 
 @pytest.mark.parametrize("isotropic, coupled", [(True, True), (True, False), (False, True), (False, False)])
-def test_tv_prox_and_value_with_oriented_differences(isotropic, coupled, engine):
+@pytest.mark.parametrize("channels", [2, 3])  # three channels have loops of their own
+def test_tv_prox_and_value_with_oriented_differences(isotropic, coupled, channels, engine):
     rng = np.random.default_rng(3)
-    shape = (3, 4, 6, 5, 2)
+    shape = (3, 4, 6, 5, channels)
     aw, mu, n_inner = (1.0, 0.5, 1.0, 2.0), 0.3, 4
     od = OrientedDifferences(torch.as_tensor(rng.uniform(-1.5, 1.5, shape[2:4])))
 

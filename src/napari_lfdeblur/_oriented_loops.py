@@ -28,6 +28,18 @@ prange = numba.prange
 def _scatter(dst, g, i0, i1, w, alpha):
     """``dst += alpha * S^T g``, ``S`` the shift of the taps ``i0, i1, w`` (``dst``, ``g``: (N, C))."""
     C = dst.shape[1]
+    if C == 3:  # unrolled: the common case
+        for k in range(dst.shape[0]):
+            k0, k1, ww = i0[k], i1[k], w[k]
+            a, b = alpha * (1 - ww), alpha * ww
+            t0, t1, t2 = g[k, 0], g[k, 1], g[k, 2]
+            dst[k0, 0] += a * t0
+            dst[k0, 1] += a * t1
+            dst[k0, 2] += a * t2
+            dst[k1, 0] += b * t0
+            dst[k1, 1] += b * t1
+            dst[k1, 2] += b * t2
+        return
     for k in range(dst.shape[0]):
         k0, k1, ww = i0[k], i1[k], w[k]
         for c in range(C):
@@ -80,6 +92,15 @@ def _add_difference(dst, src, cur, i0, i1, w, r0, alpha):
     """``dst[j] += alpha * ((S src)[r0 + p] - cur[r0 + p])`` for the pixels ``p`` of a row, ``dst`` (X * C) a row,
     ``src``, ``cur`` (N, C) views (``S``: the shift of the taps ``i0, i1, w``)."""
     C = src.shape[1]
+    if C == 3:  # unrolled: the common case
+        for p in range(dst.shape[0] // 3):
+            k = r0 + p
+            k0, k1, ww = i0[k], i1[k], w[k]
+            a, b = alpha * (1 - ww), alpha * ww
+            dst[3 * p] += a * src[k0, 0] + b * src[k1, 0] - alpha * cur[k, 0]
+            dst[3 * p + 1] += a * src[k0, 1] + b * src[k1, 1] - alpha * cur[k, 1]
+            dst[3 * p + 2] += a * src[k0, 2] + b * src[k1, 2] - alpha * cur[k, 2]
+        return
     for p in range(dst.shape[0] // C):
         k = r0 + p
         k0, k1, ww = i0[k], i1[k], w[k]

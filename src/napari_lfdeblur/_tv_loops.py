@@ -1,7 +1,11 @@
 """Row loops of the TV shared by :mod:`~napari_lfdeblur._fused_loops` and :mod:`~napari_lfdeblur._oriented_loops`.
 
 A row is a 1D array of ``X * C`` samples (``C`` channels per pixel);
-importing this module needs numba.
+importing this module needs numba. The loops use numpy's error model (a
+division by zero gives inf or nan instead of raising), which lets LLVM
+vectorise the divisions and square roots of the projections; no division
+here can meet a zero. Three channels, the common case, have loops of their
+own, which vectorise where the general ones do not.
 """
 
 import numba
@@ -9,8 +13,12 @@ import numpy as np
 
 __all__ = ["project_dual_row", "tv_add_row", "tv_row_norms"]
 
+_njit = numba.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+#: the TV's sums may be reordered (``reassoc``), which lets them vectorise
+_njit_sum = numba.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
 
-@numba.njit(cache=True, fastmath={"contract"})
+
+@_njit
 def project_dual_row(g0, g1, g2, g3, C, isotropic, coupled, one, nrm):
     """One row of the dual onto the unit ball of the TV's dual norm (as ``priors.project_tv_dual``).
 
@@ -26,6 +34,9 @@ def project_dual_row(g0, g1, g2, g3, C, isotropic, coupled, one, nrm):
         return
     if not isotropic:  # coupled: each component's vector over the channels
         for g in (g0, g1, g2, g3):
+            if C == 3:
+                _scale_rgb(g, one)
+                continue
             for j in range(XC):
                 nrm[j] = g[j] * g[j]
             _channel_scales(nrm, C, one)
@@ -46,9 +57,27 @@ def project_dual_row(g0, g1, g2, g3, C, isotropic, coupled, one, nrm):
         g3[j] *= nrm[j]
 
 
-@numba.njit(cache=True, fastmath={"contract"})
+@_njit
+def _scale_rgb(g, one):
+    """Each pixel of the row ``g`` (3 channels) onto the unit ball: times ``1 / max(|.|, 1)`` of its norm."""
+    for p in range(g.shape[0] // 3):
+        a, b, c = g[3 * p], g[3 * p + 1], g[3 * p + 2]
+        f = one / max(np.sqrt(a * a + b * b + c * c), one)
+        g[3 * p] = a * f
+        g[3 * p + 1] = b * f
+        g[3 * p + 2] = c * f
+
+
+@_njit
 def _channel_scales(nrm, C, one):
     """``nrm`` (squares per sample) becomes ``1 / max(|.|, 1)`` of each pixel's norm over its ``C`` channels."""
+    if C == 3:
+        for p in range(nrm.shape[0] // 3):
+            s = one / max(np.sqrt(nrm[3 * p] + nrm[3 * p + 1] + nrm[3 * p + 2]), one)
+            nrm[3 * p] = s
+            nrm[3 * p + 1] = s
+            nrm[3 * p + 2] = s
+        return
     for j in range(0, nrm.shape[0], C):
         s = nrm[j]
         for c in range(1, C):
@@ -58,7 +87,7 @@ def _channel_scales(nrm, C, one):
             nrm[j + c] = s
 
 
-@numba.njit(cache=True, fastmath={"contract"})
+@_njit_sum
 def tv_add_row(d, acc, isotropic, coupled, C):
     """Adds a row of weighted differences ``d`` to the TV: squares into ``acc`` (isotropic), else the norms."""
     if isotropic:
@@ -67,6 +96,10 @@ def tv_add_row(d, acc, isotropic, coupled, C):
         return 0.0
     total = 0.0
     if coupled:
+        if C == 3:
+            for p in range(d.shape[0] // 3):
+                total += np.sqrt(d[3 * p] * d[3 * p] + d[3 * p + 1] * d[3 * p + 1] + d[3 * p + 2] * d[3 * p + 2])
+            return total
         for j in range(0, d.shape[0], C):
             s = d[j] * d[j]
             for c in range(1, C):
@@ -78,7 +111,7 @@ def tv_add_row(d, acc, isotropic, coupled, C):
     return total
 
 
-@numba.njit(cache=True, fastmath={"contract"})
+@_njit_sum
 def tv_row_norms(acc, isotropic, coupled, C):
     """The isotropic TV of a row from its squares ``acc`` (:func:`tv_add_row`): the sum of the samples' (with
     ``coupled``, the pixels') norms; 0 when not ``isotropic``."""
