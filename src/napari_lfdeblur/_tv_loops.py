@@ -6,6 +6,11 @@ division by zero gives inf or nan instead of raising), which lets LLVM
 vectorise the divisions and square roots of the projections; no division
 here can meet a zero. Three channels, the common case, have loops of their
 own, which vectorise where the general ones do not.
+
+numba caches each compiled function with its own file, and the callers'
+caches do not see edits here: after changing this module, delete the
+``*.nbi`` and ``*.nbc`` files in ``__pycache__`` (or the callers keep
+running the old code).
 """
 
 import numba

@@ -385,7 +385,7 @@ def _add_deconvolve(sub):
     p.add_argument("--along-views", action="store_true",
                    help="tv: the isotropic TV whose angular differences compare the same pixel of neighbouring "
                         "views (default: the anisotropic TV along the scene's disparity, estimated from the input, "
-                        "which restores better in two to three times the time; docs/deconvolution.md)")
+                        "which restores better in about twice the time; docs/deconvolution.md)")
     p.add_argument("--iterations", type=int, default=200, help="maximum TV iterations (default 200)")
     p.add_argument("--tol", type=float, default=1e-4,
                    help="TV stops when the objective falls by less than this fraction in an iteration (default 1e-4)")

@@ -155,7 +155,7 @@ class DeconvolutionParams(JsonParams):
         whatever the texture, so the TV removes what differs from view to
         view (noise, ringing) and keeps the texture. With
         ``isotropic=False`` it restores best (docs/deconvolution.md,
-        *Angular differences*), at two to three times the cost of ``'views'``.
+        *Angular differences*), at about twice the cost of ``'views'``.
     couple_channels : bool
         ``'tv'`` on a colour light field: one colour TV over all channels
         (the default; the norm per sample taken over the channels too, see

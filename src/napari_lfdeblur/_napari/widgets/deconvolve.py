@@ -65,8 +65,8 @@ def _fields() -> list:
         CheckBox(name="along_disparity", value=True, label="TV along disparity",
                  tooltip="tv: the anisotropic TV whose angular differences follow the scene's disparity (estimated "
                          "from the data), which charges noise and ringing but not the scene's parallax (the "
-                         "default); untick for the isotropic TV between the same pixel of neighbouring views, two "
-                         "to three times as fast, which restores less well (its weight from the noise is twice this "
+                         "default); untick for the isotropic TV between the same pixel of neighbouring views, "
+                         "about twice as fast, which restores less well (its weight from the noise is twice this "
                          "one's)"),
         CheckBox(name="saturation", value=True, label="saturated samples",
                  tooltip="tv: samples at 1 are taken as clipped by the sensor (the light there reached at least "
