@@ -5,7 +5,7 @@ importing this module needs numba. The loops use numpy's error model (a
 division by zero gives inf or nan instead of raising), which lets LLVM
 vectorise the divisions and square roots of the projections; no division
 here can meet a zero. Three channels, the common case, have loops of their
-own, which vectorise where the general ones do not.
+own (the pixels' norms), which vectorise where the general ones do not.
 
 numba caches each compiled function with its own file, and the callers'
 caches do not see edits here: after changing this module, delete the
@@ -39,9 +39,6 @@ def project_dual_row(g0, g1, g2, g3, C, isotropic, coupled, one, nrm):
         return
     if not isotropic:  # coupled: each component's vector over the channels
         for g in (g0, g1, g2, g3):
-            if C == 3:
-                _scale_rgb(g, one)
-                continue
             for j in range(XC):
                 nrm[j] = g[j] * g[j]
             _channel_scales(nrm, C, one)
@@ -60,17 +57,6 @@ def project_dual_row(g0, g1, g2, g3, C, isotropic, coupled, one, nrm):
         g1[j] *= nrm[j]
         g2[j] *= nrm[j]
         g3[j] *= nrm[j]
-
-
-@_njit
-def _scale_rgb(g, one):
-    """Each pixel of the row ``g`` (3 channels) onto the unit ball: times ``1 / max(|.|, 1)`` of its norm."""
-    for p in range(g.shape[0] // 3):
-        a, b, c = g[3 * p], g[3 * p + 1], g[3 * p + 2]
-        f = one / max(np.sqrt(a * a + b * b + c * c), one)
-        g[3 * p] = a * f
-        g[3 * p + 1] = b * f
-        g[3 * p + 2] = c * f
 
 
 @_njit
