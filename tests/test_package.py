@@ -16,6 +16,20 @@ def test_every_public_name_resolves():
         assert getattr(napari_lfdeblur, name) is not None, name
 
 
+def test_readme_python_api_names_are_top_level():
+    """Every function or class the README's Python API list names is ``napari_lfdeblur.<name>``."""
+    import importlib
+    import re
+
+    section = (ROOT / "README.md").read_text().split("## Python API", 1)[1].split("\n## ", 1)[0]
+    bullets = "\n".join(line for line in section.splitlines() if line.startswith(("- ", "  ")))
+    modules = [importlib.import_module(f"napari_lfdeblur.{m}") for m in set(napari_lfdeblur._PUBLIC.values())]
+    quoted = set(re.findall(r"`([A-Za-z_]\w*)`", bullets))
+    named = {n for n in quoted if any(callable(getattr(m, n, None)) for m in modules)}
+    assert len(named) > 20  # the list was found
+    assert sorted(named - set(napari_lfdeblur.__all__)) == []
+
+
 def test_core_imports_neither_qt_nor_napari():
     code = (
         "import sys, napari_lfdeblur as m\n"

@@ -32,6 +32,9 @@ _PUBLIC = {
     "save_path_json": "path",
     "load_path_json": "path",
     "read_path_json": "path",
+    "path_view_mismatch": "path",
+    "path_in_frame": "path",
+    "path_in_window": "path",
     # forward model
     "simulate_blur": "blur",
     "BlurOperator": "blur",

@@ -352,12 +352,12 @@ class BlindDeblurWidget(SolverWidget):
         self.last_layers = [out, path]
         info = getattr(result, "info", None) or {}
         note = ""
-        if "rejected_path" in info:  # kept as a layer, for *Deconvolve 4D*: no need to estimate it again
+        if "rejected_path" in info:  # kept as a layer, for *4D deconvolution*: no need to estimate it again
             rejected = add_layer(self.viewer, path_layer_data(
                 info["rejected_path"], job["shape"], n_times=n_times, name=f"{job['source']} rejected path",
                 true_control_points=job["true"], infinity_disparity=d_inf, metadata={"kind": "rejected path"}))
             self.last_layers.append(rejected)
-            note = f"; the path it rejected is in the layer '{rejected.name}', for Deconvolve 4D"
+            note = f"; the path it rejected is in the layer '{rejected.name}', for 4D deconvolution"
         self.plot.plot(cp, job["true"], n_times=max(64, n_times))
         if meta["loss_history"] and len(meta["loss_history"]) != len(self.loss_plot.values):
             self.loss_plot.plot(meta["loss_history"], [])
