@@ -391,3 +391,26 @@ def test_a_pattern_takes_the_light_fields_it_matches_and_names_the_rest(tmp_path
         expand_inputs(str(tmp_path / "*.json"))
     listed = [tmp_path / "README.md", tmp_path / "a.npz"]  # given one by one: all kept (README fails as an item)
     assert expand_inputs(listed) == listed
+
+
+def test_a_script_without_a_main_guard_gets_told_why_the_workers_failed(tmp_path):
+    import subprocess
+
+    write_lightfield(tmp_path / "scene.npz", np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32))
+    script = tmp_path / "unguarded.py"
+    script.write_text("from napari_lfdeblur.batch import simulate_dataset\n"
+                      "simulate_dataset('scene.npz', 'out', seed=1, workers=1, device='cpu')\n")
+    run = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert run.returncode != 0
+    last = run.stderr.strip().splitlines()[-1]
+    assert last.startswith("RuntimeError: the embedded cluster's workers did not start")
+    assert "if __name__ == '__main__':" in last
+    # the worker refused before touching the output folder: no 'another run is writing' (its manifest's lock)
+    assert "another run is writing" not in run.stderr
+    guarded = tmp_path / "guarded.py"
+    guarded.write_text("from napari_lfdeblur.batch import simulate_dataset\n"
+                       "if __name__ == '__main__':\n"
+                       "    print(simulate_dataset('scene.npz', 'out', seed=1, workers=1, device='cpu').n_ok)\n")
+    run = subprocess.run([sys.executable, str(guarded)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split()[-1] == "1"

@@ -17,6 +17,8 @@ from ._manifest import append_record, check_card, open_manifest, read_manifest, 
 __all__ = ["BatchReport", "connect", "expand_inputs", "gpu_workers", "run_batch"]
 
 _INSTALL = 'the batch API needs dask.distributed: pip install "napari-lfdeblur[batch]"'
+_MAIN_GUARD = ("in a script, call simulate_dataset and deblur_many under `if __name__ == '__main__':`: each worker "
+               "process of the embedded cluster starts by importing the script, which must not start a batch again")
 
 #: glibc's mmap threshold for the worker processes of the embedded cluster, in bytes. dask's nanny
 #: sets ``MALLOC_TRIM_THRESHOLD_`` to 64 KiB before it spawns a worker, and any explicit malloc
@@ -86,6 +88,24 @@ class BatchReport:
         return [r for r in self.records if r["status"] == "failed"]
 
 
+def _starting_process() -> bool:
+    """Whether this runs while a spawned process imports the parent's main script.
+
+    A process started by ``multiprocessing``'s spawn (as dask's nannies start
+    their workers) first runs the parent's script as ``__mp_main__``
+    (``multiprocessing.spawn.prepare``), before it runs any task.
+    """
+    import sys
+
+    frame = sys._getframe(1)
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "prepare" and code.co_filename.endswith(os.path.join("multiprocessing", "spawn.py")):
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _distributed():
     try:
         import distributed
@@ -141,11 +161,14 @@ def connect(client=None, *, workers: int | None = None, device: str = "auto"):
     n = workers or (1 if gpu else os.cpu_count() or 1)
     import dask
 
-    with dask.config.set(EMBEDDED_CLUSTER_CONFIG):
-        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           resources={"GPU": 1} if gpu else None, dashboard_address=":0",
-                                           env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
-                                           preload=[_WORKER_SETUP])
+    try:
+        with dask.config.set(EMBEDDED_CLUSTER_CONFIG):
+            cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                               resources={"GPU": 1} if gpu else None, dashboard_address=":0",
+                                               env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
+                                               preload=[_WORKER_SETUP])
+    except RuntimeError as exc:  # e.g. "Nanny failed to start worker process"
+        raise RuntimeError(f"the embedded cluster's workers did not start ({exc}); {_MAIN_GUARD}") from exc
     with cluster, distributed.Client(cluster) as c:
         yield c
 
@@ -266,7 +289,14 @@ def _collect(client, todo, resources, manifest, callback, records):
 
 
 def run_batch(specs: list, out_dir: Path, *, client, workers, device, card: dict, callback=None) -> BatchReport:
-    """Run the items ``specs`` (dicts, see :func:`~._items.run_item`) into ``out_dir``."""
+    """Run the items ``specs`` (dicts, see :func:`~._items.run_item`) into ``out_dir``.
+
+    Raises RuntimeError, before touching ``out_dir``, where it runs as a
+    script imported by a worker process being started (the script calls it
+    unguarded by ``if __name__ == '__main__':``).
+    """
+    if _starting_process():
+        raise RuntimeError(_MAIN_GUARD)
     if device not in ("auto", "cpu", "cuda"):
         raise ValueError(f"device must be 'auto', 'cpu' or 'cuda'; got {device!r}")
     outputs = [Path(s["output"]).name for s in specs]
