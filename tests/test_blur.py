@@ -120,6 +120,31 @@ def test_gradcheck_lightfield_and_path(d_inf, engine):
     assert torch.autograd.gradcheck(f, (lf, cp), eps=1e-6, atol=1e-6)
 
 
+@pytest.mark.parametrize("d_inf", [0.0, 0.6])
+def test_path_gradient_on_the_views_is_the_right_sided_derivative(d_inf, engine):
+    # an in-plane path along x: p_y is 0 at every instant, so every lookup along v falls exactly on a view,
+    # where the weight of the next view is zero but its difference from this view is the derivative
+    torch.manual_seed(0)
+    lf = torch.rand(4, 5, 6, 7, 1, dtype=torch.float64)
+    target = torch.rand(4, 5, 6, 7, 1, dtype=torch.float64)
+    cp0 = torch.tensor([[-1.1, 0.0, 0.0], [0.3, 0.0, 0.0], [0.9, 0.0, 0.0]], dtype=torch.float64)
+
+    def loss(cp):
+        op = BlurOperator(lf.shape, cp, n_times=5, infinity_disparity=d_inf, dtype=torch.float64)
+        return 0.5 * ((op.forward(lf) - target) ** 2).sum()
+
+    cp = cp0.clone().requires_grad_(True)
+    (grad,) = torch.autograd.grad(loss(cp), cp)
+    h = 1e-7
+    for i in range(3):
+        step = torch.zeros_like(cp0)
+        step[i, 1] = h
+        right = (loss(cp0 + step) - loss(cp0)) / h
+        assert float(grad[i, 1]) == pytest.approx(float(right), rel=1e-4, abs=1e-6), i
+        left = (loss(cp0) - loss(cp0 - step)) / h
+        assert abs(float(right - left)) > 1e-2  # a kink: the two sides differ
+
+
 @pytest.mark.parametrize("d_inf", [0.0, 0.8])
 def test_adjoint(d_inf, engine):
     gen = torch.Generator().manual_seed(1)

@@ -45,6 +45,8 @@ import warnings
 import numpy as np
 import torch
 
+from ._taps import active_offsets
+
 __all__ = ["available", "call", "check_writable", "rows", "column_spans", "forward", "add_adjoint", "kernel_grad",
            "FusedTaps", "prox_sweep", "prox_primal", "tv_value", "view_variance", "add_laplacian", "tile_accumulate",
            "tile_shift_grads"]
@@ -263,11 +265,12 @@ class FusedTaps:
     def angular(cls, shape, K, ov, ou):
         """The ``d_inf = 0`` kernel of :func:`~napari_lfdeblur._taps.tap_kernel`, ``K`` (Y, X, Dv, Du).
 
-        Only offsets that carry weight somewhere become taps; the kernel
-        gradient comes back as ``(Y, X, Dv, Du)``, zero at the others.
+        The offsets of :func:`~napari_lfdeblur._taps.active_offsets` become
+        taps; the kernel gradient comes back as ``(Y, X, Dv, Du)``, zero at
+        the others.
         """
         Kd = K.detach()
-        active = (Kd.abs().amax(dim=(0, 1)) > 0).nonzero().tolist()
+        active = active_offsets(K)
         stack = torch.stack([Kd[:, :, i, j] for i, j in active])
 
         def to_kernel(g):

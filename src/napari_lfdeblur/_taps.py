@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["tap_kernel", "Taps", "TapBlur", "fold", "rows_per_block"]
+__all__ = ["tap_kernel", "active_offsets", "Taps", "TapBlur", "fold", "rows_per_block"]
 
 
 # --------------------------------------------- angular blur as offset taps
@@ -73,6 +73,18 @@ def tap_kernel(s_u: torch.Tensor, s_v: torch.Tensor, U: int, V: int):
     return K, ov, ou
 
 
+def active_offsets(K: torch.Tensor) -> list:
+    """The ``(i, j)`` offsets of a :func:`tap_kernel` ``K`` (Y, X, Dv, Du) that become taps.
+
+    Those that weigh something somewhere; where ``K`` needs a gradient, all
+    of them: a lookup exactly on a view weighs zero on the next view, whose
+    difference is still its derivative.
+    """
+    if K.requires_grad:
+        return [(i, j) for i in range(K.shape[2]) for j in range(K.shape[3])]
+    return (K.detach().abs().amax(dim=(0, 1)) > 0).nonzero().tolist()
+
+
 def rows_per_block(n_per_row: int, budget: int, Y: int) -> int:
     return int(max(1, min(Y, budget // max(1, n_per_row))))
 
@@ -109,8 +121,7 @@ class Taps:
         self.iv = torch.arange(ov, ov + V + Dv - 1, device=dev).clamp_(0, V - 1)
         self.iu = torch.arange(ou, ou + U + Du - 1, device=dev).clamp_(0, U - 1)
         self.iv_list, self.iu_list = self.iv.tolist(), self.iu.tolist()
-        active = (self.Kt.abs().amax(dim=(2, 3)) > 0).nonzero().tolist()
-        self.taps = [(int(i), int(j)) for i, j in active]
+        self.taps = [(int(i), int(j)) for i, j in active_offsets(K)]
         self.step = rows_per_block((V + Dv - 1) * (U + Du - 1) * X * C, block_elements, Y)
 
     def blocks(self):

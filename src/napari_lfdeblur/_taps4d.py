@@ -70,6 +70,10 @@ def pair_splat(shift: torch.Tensor, d_inf: float, n_views: int, n_pixels: int):
         Weight of each offset pair, differentiable in ``shift``.
     pairs : torch.Tensor, int64, shape (P, 2)
         The ``(angular, spatial)`` offsets of the pairs.
+    touched : torch.Tensor, bool, shape (T, P)
+        Whether a corner of some lookup of the instant lands on the pair,
+        with a zero weight too: a lookup exactly on a sample still has the
+        next sample in its derivative.
     """
     (oa, fa), (ob, fb) = axis_taps(shift, n_views), axis_taps(d_inf * shift, n_pixels)
     corners = [(0, 0, (1 - fa) * (1 - fb)), (1, 0, fa * (1 - fb)), (0, 1, (1 - fa) * fb), (1, 1, fa * fb)]
@@ -82,7 +86,9 @@ def pair_splat(shift: torch.Tensor, d_inf: float, n_views: int, n_pixels: int):
     uniq, inverse = torch.unique(code, return_inverse=True)
     h = w.new_zeros(shift.shape + (len(uniq),)).scatter_add(-1, inverse, w)
     pairs = torch.stack([uniq // width + a_min, uniq % width + b_min], dim=1)
-    return h, pairs
+    touched = torch.zeros((shift.shape[0], len(uniq)), dtype=torch.bool, device=shift.device)
+    touched[torch.arange(shift.shape[0], device=shift.device)[:, None], inverse.flatten(1)] = True
+    return h, pairs, touched
 
 
 def tap_kernel_4d(s_u: torch.Tensor, s_v: torch.Tensor, d_inf: float, shape):
@@ -99,16 +105,20 @@ def tap_kernel_4d(s_u: torch.Tensor, s_v: torch.Tensor, d_inf: float, shape):
     Returns
     -------
     K : torch.Tensor, shape (S, Y, X)
-        Weight maps of the ``S`` taps, differentiable in the shifts.
+        Weight maps of the ``S`` taps, differentiable in the shifts. Where
+        the shifts need a gradient, the taps include those that only weigh
+        zero (a lookup exactly on a sample: the derivative there reads the
+        next sample); otherwise only those that weigh something.
     offsets : torch.Tensor, int64, shape (S, 4)
         The ``(a, b, c, e)`` offsets of ``(v, y, u, x)`` of each tap.
     """
     V, U, Y, X = shape[:4]
-    hv, pv = pair_splat(s_v, d_inf, V, Y)  # (T, Y, P)
-    hu, pu = pair_splat(s_u, d_inf, U, X)  # (T, X, Q)
+    hv, pv, tv = pair_splat(s_v, d_inf, V, Y)  # (T, Y, P)
+    hu, pu, tu = pair_splat(s_u, d_inf, U, X)  # (T, X, Q)
     # the taps some instant uses: an offset pair of v active with one of u at the same instant
-    av = (hv.detach() != 0).any(dim=1).to(hv.dtype)  # (T, P)
-    au = (hu.detach() != 0).any(dim=1).to(hu.dtype)  # (T, Q)
+    grad = s_u.requires_grad or s_v.requires_grad
+    av = (tv if grad else (hv.detach() != 0).any(dim=1)).to(hv.dtype)  # (T, P)
+    au = (tu if grad else (hu.detach() != 0).any(dim=1)).to(hu.dtype)  # (T, Q)
     p, q = ((av.T @ au) > 0).nonzero(as_tuple=True)
     K = torch.einsum("kys,kxs->syx", hv[:, :, p], hu[:, :, q]) / s_u.shape[0]
     offsets = torch.stack([pv[p, 0], pv[p, 1], pu[q, 0], pu[q, 1]], dim=1)
