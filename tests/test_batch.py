@@ -414,3 +414,25 @@ def test_a_script_without_a_main_guard_gets_told_why_the_workers_failed(tmp_path
     run = subprocess.run([sys.executable, str(guarded)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout.split()[-1] == "1"
+
+
+@pytest.mark.parametrize("kwargs, error, message", [
+    ({"noise": -1.0}, ValueError, "noise must be >= 0"),
+    ({"n_times": 0}, ValueError, "n_times must be >= 2"),
+    ({"n_times": 2.5}, TypeError, "n_times must be an integer"),
+    ({"infinity_disparity": float("nan")}, ValueError, "infinity_disparity must be finite"),
+    ({"device": "cuda"}, ValueError, "no CUDA GPU"),
+])
+def test_bad_arguments_fail_before_the_run_starts(inputs, tmp_path, kwargs, error, message):
+    import torch
+
+    if kwargs.get("device") == "cuda" and torch.cuda.is_available():
+        pytest.skip("a GPU is there")
+    out = tmp_path / "out"
+    with pytest.raises(error, match=message):
+        simulate_dataset(inputs, out, **kwargs)
+    assert not out.exists()  # no cluster started, no manifest written
+    if "device" not in kwargs and "noise" not in kwargs and "n_times" not in kwargs:
+        with pytest.raises(error, match=message):
+            deblur_many(inputs, out, **kwargs)
+        assert not out.exists()

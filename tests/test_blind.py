@@ -531,6 +531,9 @@ def test_replace_merges_a_dict_into_the_current_sub_params_or_takes_an_instance(
         BlindParams(n_control_points=2.0)
     with pytest.raises(ValueError, match="path.steps"):
         p.replace(path={"steps": 0})
+    for text in ('{"require_evidence": "false"}', '{"path": {"estimate_z": 0}}', '{"final": {"isotropic": "no"}}'):
+        with pytest.raises(TypeError, match="must be true or false"):
+            BlindParams.from_json(text)
     # blind_deblur: an override goes through replace(); an unknown keyword is a TypeError
     good = np.zeros((5, 5, 8, 8), np.float32)
     with pytest.raises(TypeError, match="tv_iter"):

@@ -10,7 +10,7 @@ from napari_lfdeblur.blur import BlurOperator, to_tensor
 from napari_lfdeblur.path import bezier_positions, center_path
 
 
-@pytest.mark.parametrize("shape", [(5, 4, 7, 9), (3, 5, 6, 5, 3)], ids=["gray", "colour"])
+@pytest.mark.parametrize("shape", [(5, 4, 7, 9), (3, 5, 7, 6, 3)], ids=["gray", "colour"])
 @pytest.mark.parametrize("d_inf", [0.0, 0.7, -1.3])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_simulate_blur_matches_brute_force(shape, d_inf, seed, engine):
@@ -179,6 +179,8 @@ def test_adjoint_equals_autograd_vjp(d_inf, engine):
         (dict(control_points=[[0, 0, np.nan], [1, 1, 0]]), "NaN"),
         (dict(n_times=1), "n_times"),
         (dict(n_times=2.5), "n_times"),
+        (dict(infinity_disparity=np.inf), "infinity_disparity must be finite"),
+        (dict(infinity_disparity=-2.5), "must be at most 2"),  # 3x3 views of 4x4 px: the outer ones move 2.5 px
         
     ],
 )

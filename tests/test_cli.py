@@ -26,6 +26,22 @@ def test_simulate_with_preset(lf_file, tmp_path):
     np.testing.assert_allclose(read_lightfield(out), simulate_blur(lf, linear_path(2.0), n_times=8), atol=1e-6)
 
 
+def test_every_reading_command_reads_a_mosaic_of_views(lf_file, tmp_path, capsys):
+    lf, _ = lf_file
+    mosaic = write_lightfield(tmp_path / "m.png", lf, layout="mosaic", bit_depth=16)
+    sharp = read_lightfield(mosaic, layout="mosaic", grid=(5, 5))
+    out = tmp_path / "b.npz"
+    assert main(["simulate", str(mosaic), str(out), "--path", "linear:2", "--n-times", "8",
+                 "--layout", "mosaic", "--grid", "5,5"]) == 0
+    np.testing.assert_allclose(read_lightfield(out), simulate_blur(sharp, linear_path(2.0), n_times=8), atol=1e-6)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as stop:  # argparse's one-line error
+        main(["deconvolve", str(mosaic), str(tmp_path / "d.npz"), "--layout", "mosaic", "--grid", "5"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "--grid: '5': expected V,U" in err and not (tmp_path / "d.npz").exists()
+
+
 def test_simulate_with_json_path_and_no_overwrite(lf_file, tmp_path, capsys):
     lf, src = lf_file
     cp = np.array([[0.3, -0.2, 0.1], [-0.5, 0.4, -0.2], [0.8, 0.1, 0.0]])
@@ -237,7 +253,7 @@ def test_simulate_takes_t_and_infinity_disparity_from_the_path_file(lf_file, tmp
                  "--n-times", "4", "--infinity-disparity", "0"]) == 0
     np.testing.assert_allclose(read_lightfield(tmp_path / "b.npz"), simulate_blur(lf, cp, n_times=4), atol=1e-6)
     # a file stating an unusable T: one line, nothing written
-    save_path_json(tmp_path / "bad.json", cp, n_times="many")
+    (tmp_path / "bad.json").write_text(json.dumps({"control_points": cp.tolist(), "n_times": "many"}))
     capsys.readouterr()
     assert main(["simulate", str(src), str(tmp_path / "c.npz"), "--path", str(tmp_path / "bad.json")]) == 2
     err = capsys.readouterr().err
@@ -512,3 +528,30 @@ def test_a_reader_warning_is_one_line(lf_file, tmp_path, capsys):
         f"lfdeblur info: warning: {tmp_path / 'lf.path.json'} was not read as the light field's camera path: "
         "control points must be an (n, 3) array of (p_x, p_y, p_z) or an (n, 6) array of (p_x, p_y, p_z, r_x, "
         "r_y, r_z); got shape (1, 2)"]
+
+
+def test_bad_seeds_paths_and_output_folders_get_one_line(lf_file, tmp_path, capsys):
+    _, src = lf_file
+    for bad in ("-1", "99999999999999999999", "x"):
+        with pytest.raises(SystemExit) as stop:
+            main(["deblur", str(src), str(tmp_path / "d.npz"), "--seed", bad])
+        assert stop.value.code == 2
+        assert f"argument --seed: '{bad}': expected a whole number from 0 to 2**63 - 1" in capsys.readouterr().err
+    for path, said in (("random:2:-5", "the SEED must be a whole number"), (str(tmp_path), "is a folder")):
+        assert main(["simulate", str(src), str(tmp_path / "b.npz"), "--path", path]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and said in err
+    (tmp_path / "afile").write_text("mine")
+    assert main(["demo", "--out", str(tmp_path / "afile"), "--quick", "--skip-blind"]) == 2
+    assert "afile is a file" in capsys.readouterr().err and (tmp_path / "afile").read_text() == "mine"
+
+
+def test_a_file_whose_own_path_is_malformed_is_read_with_a_warning(tmp_path, capsys):
+    lf = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
+    np.savez(tmp_path / "badcp.npz", lf=lf, control_points=np.zeros((2, 2)))
+    assert main(["info", str(tmp_path / "badcp.npz")]) == 0
+    captured = capsys.readouterr()
+    assert "badcp.npz: the camera path it holds was not read" in captured.err and "(3, 3, 8, 8)" in captured.out
+    np.save(tmp_path / "zeros.npy", np.zeros((5, 5, 16, 16), np.float32))  # flat views: nothing to register
+    assert main(["info", str(tmp_path / "zeros.npy")]) == 0
+    assert "warning" not in capsys.readouterr().err

@@ -687,6 +687,12 @@ def test_params_json_round_trip_and_overrides():
             DeconvolutionParams.from_json(text)
     with pytest.raises(ValueError, match="needs a dict"):
         DeconvolutionParams.from_json("[1, 2]")
+    # a bool field takes a bool: the string "false" and the number 0 are refused, not read as truth values
+    for field in ("isotropic", "couple_channels", "clip", "saturation"):
+        for value in ("false", 0):
+            with pytest.raises(TypeError, match=f"{field} must be true or false"):
+                DeconvolutionParams.from_dict({field: value})
+    assert DeconvolutionParams(isotropic=np.bool_(True)).isotropic is True
     lf = np.random.default_rng(7).random((3, 3, 6, 6)).astype(np.float32)
     recs = []
     deconvolve(lf, linear_path(1.0, z=1.0), n_times=4, params=p, n_iter=2, tol=0.0, callback=recs.append)
@@ -709,6 +715,7 @@ def test_params_json_round_trip_and_overrides():
         ({"tol": -1}, "tol"),
         ({"n_times": 1}, "n_times"),
         ({"infinity_disparity": float("nan")}, "infinity_disparity"),
+        ({"infinity_disparity": 3.5}, "at most 3"),  # 3x3 views of 6x6 px: the outer views would move 3.5 px
         ({"device": "tpu"}, "unknown device"),
         ({"blurred": np.zeros((3, 6, 6))}, "4D"),
         ({"blurred": np.full((3, 3, 6, 6), np.nan)}, "NaN"),
@@ -813,7 +820,7 @@ def test_cli_deconvolve(tmp_path, capsys):
     # a path file stating T or d_inf the model cannot take: one line naming the file and the option
     capsys.readouterr()
     for field, value, option in (("n_times", 7.5, "--n-times"), ("infinity_disparity", "far", "--infinity-disparity")):
-        save_path_json(tmp_path / "odd.json", cp, overwrite=True, **{field: value})
+        (tmp_path / "odd.json").write_text(json.dumps({"control_points": cp.tolist(), field: value}))  # by hand
         assert main(["deconvolve", str(src), str(tmp_path / "odd.json"), str(out), "--overwrite"]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and f"odd.json states {field} = {value!r}" in err and option in err

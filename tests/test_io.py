@@ -35,7 +35,7 @@ from napari_lfdeblur.io import (
     write_lightfield,
 )
 from napari_lfdeblur.io import _png, _views
-from napari_lfdeblur.path import load_path_json
+from napari_lfdeblur.path import arc_path, linear_path, load_path_json, save_path_json
 
 LYTRO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lytro-f01-img0001"
 
@@ -463,6 +463,39 @@ def test_every_format_reads_back_the_path_written_with_it(tmp_path, lf_gray, nam
     assert json.loads(path_json_beside(written).read_text())["view_shape"] == list(part.shape[2:4])
 
 
+def test_two_channels_round_trip_in_arrays_and_are_refused_as_images(tmp_path):
+    lf = np.random.default_rng(3).random((3, 3, 8, 8, 2)).astype(np.float32)
+    for name in ("a.tif", "a.npz", "a.npy", "a.h5"):
+        np.testing.assert_array_equal(read_lightfield(write_lightfield(tmp_path / name, lf)), lf)
+    for name, layout in (("views", None), ("m.png", "mosaic"), ("e.png", "eslf")):
+        with pytest.raises(LightFieldFormatError, match="an image holds 1, 3 or 4 channels"):
+            write_lightfield(tmp_path / name, lf, layout=layout)
+        assert not (tmp_path / name).exists()
+
+
+def test_a_path_file_beside_a_file_is_that_files_own(tmp_path, lf_gray):
+    # a.npy and a.npz share the name a.path.json: each file written with a path names itself in it
+    write_lightfield(tmp_path / "a.npy", lf_gray, control_points=linear_path(1.0))
+    assert json.loads((tmp_path / "a.path.json").read_text())["lightfield"] == "a.npy"
+    write_lightfield(tmp_path / "a.npz", lf_gray, control_points=arc_path(2.0), overwrite=True)
+    assert "control_points" not in read_lightfield_with_metadata(tmp_path / "a.npy")[1]  # not the arc
+    assert np.allclose(read_lightfield_with_metadata(tmp_path / "a.npz")[1]["control_points"], arc_path(2.0))
+    # a file replaced without a path takes the path of what it replaced away with it
+    write_lightfield(tmp_path / "a.npz", lf_gray, overwrite=True)
+    assert not (tmp_path / "a.path.json").exists()
+    assert "control_points" not in read_lightfield_with_metadata(tmp_path / "a.npz")[1]
+    # renamed together, a light field and its path file still go together
+    write_lightfield(tmp_path / "c.npy", lf_gray, control_points=linear_path(2.5))
+    (tmp_path / "c.npy").rename(tmp_path / "d.npy")
+    (tmp_path / "c.path.json").rename(tmp_path / "d.path.json")
+    assert np.allclose(read_lightfield_with_metadata(tmp_path / "d.npy")[1]["control_points"], linear_path(2.5))
+    # a path file that names no light field (written by hand, or by an older version) is read as before
+    save_path_json(tmp_path / "b.path.json", linear_path(1.5))
+    write_lightfield(tmp_path / "b.npy", lf_gray, overwrite=True)
+    np.testing.assert_allclose(read_lightfield_with_metadata(tmp_path / "b.npy")[1]["control_points"],
+                               linear_path(1.5))
+
+
 def test_a_path_file_for_views_of_another_size_is_read_with_a_warning(tmp_path, lf_gray):
     import warnings
 
@@ -597,6 +630,13 @@ def test_bad_truncated_image(views8):
     with pytest.raises(LightFieldReadError, match="view_02_02.png") as exc:
         read_lightfield(views8)
     assert isinstance(exc.value, OSError) and isinstance(exc.value, ValueError)
+
+
+def test_a_file_that_is_not_an_image_is_named_in_one_line(views8):
+    (views8 / "view_02_02.png").write_text("junk")  # imageio's error lists plugins to install, over many lines
+    with pytest.raises(LightFieldReadError, match="view_02_02.png: cannot decode the image") as exc:
+        read_lightfield(views8)
+    assert "\n" not in str(exc.value)
 
 
 def test_bad_truncated_16bit_colour_png(tmp_path, lf_rgb):

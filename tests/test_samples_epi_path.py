@@ -241,7 +241,16 @@ def test_save_path_json_checks_the_view_shape(tmp_path):
     for bad in ([3.5, 4], [0, 4], [4], "376x541"):
         with pytest.raises(ValueError, match="view_shape .* not two whole numbers"):
             save_path_json(tmp_path / "q.json", linear_path(1.0), view_shape=bad)
+    # the other fields the package reads back are checked as the readers check them
+    for bad in (0, 2.5, "many"):
+        with pytest.raises(ValueError, match="n_times .* not a whole number >= 2"):
+            save_path_json(tmp_path / "q.json", linear_path(1.0), n_times=bad)
+    with pytest.raises(ValueError, match="infinity_disparity .* not a finite number"):
+        save_path_json(tmp_path / "q.json", linear_path(1.0), infinity_disparity=float("nan"))
     assert not (tmp_path / "q.json").exists()
+    with pytest.raises(FileNotFoundError, match="the folder .*nodir does not exist"):
+        save_path_json(tmp_path / "nodir" / "q.json", linear_path(1.0))
+    assert list(tmp_path.iterdir()) == [f]  # no temporary file left
 
 
 def test_elevate_degree_cannot_lower_the_degree():

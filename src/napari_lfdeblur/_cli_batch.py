@@ -13,7 +13,7 @@ import sys
 import threading
 from pathlib import Path
 
-from ._cli_types import value_range
+from ._cli_types import seed, value_range
 
 __all__ = ["add_batch", "run_batch", "weak_blur_summary", "ctrl_c_never_swallowed"]
 
@@ -32,7 +32,7 @@ def _common(p) -> None:
     p.add_argument("--infinity-disparity", type=float, default=None,
                    help="d_inf in px/view (simulate: default 0; deblur: default each input's own, the one its file "
                    "states, as batch simulate's outputs do, else 0)")
-    p.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="the run's seed (default 0)")
     p.add_argument("--value-range", type=value_range, default=None, metavar="LO,HI",
                    help="the stored values that become 0 and 1 when the inputs are read, such as 0,4095 for "
                    "12-bit data in a 16-bit file, or auto (each input's own minimum and maximum)")

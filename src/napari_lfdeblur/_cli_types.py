@@ -6,7 +6,10 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ["angular_crop", "fraction", "gib", "value_range", "window"]
+__all__ = ["angular_crop", "fraction", "gib", "seed", "value_range", "view_grid", "window", "MAX_SEED"]
+
+#: seeds are whole numbers from 0 to this (torch's generators take 64-bit signed seeds)
+MAX_SEED = 2**63 - 1
 
 
 def angular_crop(text: str):
@@ -40,6 +43,28 @@ def gib(text: str) -> int:
     if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number of GiB, such as 4 or 1.5")
     return int(value * 2**30)
+
+
+def view_grid(text: str) -> tuple:
+    """``--grid``: ``V,U`` (or ``VxU``), the views of a mosaic."""
+    try:
+        sizes = tuple(int(n) for n in text.replace("x", ",").split(","))
+    except ValueError:
+        sizes = ()
+    if len(sizes) != 2 or min(sizes) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected V,U such as 9,9")
+    return sizes
+
+
+def seed(text: str) -> int:
+    """``--seed``: a whole number from 0 to :data:`MAX_SEED`."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number from 0 to 2**63 - 1")
+    return value
 
 
 def value_range(text: str):

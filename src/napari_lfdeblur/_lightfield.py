@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-__all__ = ["check_int", "check_number", "validate_lightfield", "brightest", "DARK_LEVEL", "BRIGHT_LIMIT"]
+__all__ = ["check_int", "check_number", "check_infinity_disparity", "validate_lightfield", "brightest",
+           "DARK_LEVEL", "BRIGHT_LIMIT"]
 
 #: A light field whose :func:`brightest` value is below this is dark: the blind solver's salient-edge
 #: weight is absolute, and dark data (10- or 12-bit values in a 16-bit file, a linear decode) show it few edges.
@@ -42,6 +43,34 @@ def check_number(value, name: str) -> float:
     if not math.isfinite(v):
         raise ValueError(f"{name} must be finite; got {value!r}")
     return v
+
+
+def check_infinity_disparity(infinity_disparity, shape) -> float:
+    """``infinity_disparity`` as a float, checked against the light field's ``shape`` (V, U, Y, X[, C]).
+
+    The bound: ``|d_inf| * (max(V, U) - 1) / 2`` (the refocus of the
+    outermost view, whose offset from the centre is ``(max(V, U) - 1) / 2``
+    views) must not exceed half the smaller spatial size, ``min(Y, X) / 2``:
+    beyond it, more than half of the outermost views' samples fall outside
+    the view and are clamped to its border, and the model no longer sees the
+    scene there.
+
+    Raises
+    ------
+    TypeError
+        If it is not a real number.
+    ValueError
+        If it is not finite or beyond the bound.
+    """
+    d_inf = check_number(infinity_disparity, "infinity_disparity")
+    V, U, Y, X = shape[:4]
+    half = (max(V, U) - 1) / 2.0
+    if abs(d_inf) * half > min(Y, X) / 2.0:
+        raise ValueError(
+            f"infinity_disparity = {d_inf:g} px/view is beyond what {Y} x {X} views allow: the outermost view "
+            f"would be shifted by {abs(d_inf) * half:g} px, more than half the view; |infinity_disparity| must "
+            f"be at most {min(Y, X) / (2.0 * half):g}")
+    return d_inf
 
 
 def check_int(value, name: str, minimum: int | None = None) -> int:

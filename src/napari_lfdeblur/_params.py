@@ -16,7 +16,7 @@ from dataclasses import MISSING, asdict, fields
 
 import numpy as np
 
-__all__ = ["JsonParams", "check_int", "check_float"]
+__all__ = ["JsonParams", "check_int", "check_float", "check_bool"]
 
 
 class JsonParams:
@@ -164,3 +164,15 @@ def check_float(obj, name: str, kind: str, label: str) -> None:
         what = {"positive": "> 0", "nonneg": ">= 0", "signed": "a number"}[kind]
         raise ValueError(f"{label} must be finite and {what}; got {v!r}")
     object.__setattr__(obj, name, v)
+
+
+def check_bool(obj, name: str, label: str) -> None:
+    """Check that ``obj.<name>`` is a bool (Python's or numpy's) and store it as ``bool``.
+
+    Raises TypeError for anything else: the strings ``"false"`` or ``"0"``
+    (true as Python truth values) and the numbers 0 and 1 included.
+    """
+    v = getattr(obj, name)
+    if not isinstance(v, (bool, np.bool_)):
+        raise TypeError(f"{label} must be true or false; got {v!r}")
+    object.__setattr__(obj, name, bool(v))

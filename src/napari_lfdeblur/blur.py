@@ -45,7 +45,7 @@ import numpy as np
 import torch
 
 from . import _fused
-from ._lightfield import check_number, validate_lightfield
+from ._lightfield import check_infinity_disparity, check_number, validate_lightfield
 from .devices import select_device
 from ._taps import TapBlur, Taps, tap_kernel
 from ._taps4d import Taps4D, tap_kernel_4d
@@ -436,13 +436,20 @@ def simulate_blur(lf, control_points, *, n_times: int = 32, infinity_disparity: 
     n_times : int, default 32
         Number of exposure instants ``T >= 2``.
     infinity_disparity : float, default 0.0
-        Disparity of points at infinity ``d_inf``, px/view.
+        Disparity of points at infinity ``d_inf``, px/view: finite, and
+        ``|d_inf| (max(V, U) - 1) / 2 <= min(Y, X) / 2`` (the outermost
+        view's refocus within half the view).
     device : {'auto', 'cpu', 'cuda'}, default 'auto'
 
     Returns
     -------
     ndarray, float32, same shape as ``lf``
         The blurred light field.
+
+    Raises
+    ------
+    ValueError
+        If ``infinity_disparity`` is not finite or beyond that bound.
 
     Examples
     --------
@@ -454,7 +461,8 @@ def simulate_blur(lf, control_points, *, n_times: int = 32, infinity_disparity: 
     arr = validate_lightfield(lf)
     n_times = validate_n_times(n_times)
     cp = validate_control_points(control_points)
-    op = BlurOperator(arr.shape, cp, n_times=n_times, infinity_disparity=infinity_disparity, device=device)
+    d_inf = check_infinity_disparity(infinity_disparity, arr.shape)
+    op = BlurOperator(arr.shape, cp, n_times=n_times, infinity_disparity=d_inf, device=device)
     with torch.no_grad():
         out = op.forward(to_tensor(arr, device=op.device))
     return from_tensor(out, arr.ndim)

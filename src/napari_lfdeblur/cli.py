@@ -26,7 +26,7 @@ from ._cli_info import (
     stated_value,
     warn_view_mismatch,
 )
-from ._cli_types import angular_crop, fraction, gib, value_range, window
+from ._cli_types import MAX_SEED, angular_crop, fraction, gib, seed, value_range, view_grid, window
 
 __all__ = ["main"]
 
@@ -45,8 +45,12 @@ def _progress(iterable=None, **kwargs):
 
 
 def _input_argument(p, help_text="light field file or folder"):
-    """INPUT, ``--swap-views``, ``--angular-crop`` and ``--value-range``: the commands that read a light field."""
+    """INPUT and how to read it (layout, views, values): the options of the commands that read a light field."""
     p.add_argument("input", help=help_text)
+    p.add_argument("--layout", default=None, help="override the detected layout (views, hci, stanford, eslf, "
+                   "mosaic, mat, h5, npy, npz, tiff)")
+    p.add_argument("--grid", type=view_grid, default=None, metavar="V,U", help="view grid (mosaic layout)")
+    p.add_argument("--angular-size", type=int, default=None, metavar="A", help="lenslet size A (eslf layout)")
     p.add_argument("--swap-views", action="store_true",
                    help="swap the two view axes after reading (for exports that name the horizontal view first)")
     p.add_argument("--angular-crop", type=angular_crop, default=None, metavar="N",
@@ -82,10 +86,9 @@ def _read(args, **options):
 
     if not Path(args.input).exists():
         raise CLIError(f"input {args.input} does not exist")
-    if args.angular_crop is not None:
-        options["angular_crop"] = args.angular_crop
-    if args.value_range is not None:
-        options["value_range"] = args.value_range
+    for key in ("layout", "grid", "angular_size", "angular_crop", "value_range"):
+        if getattr(args, key) is not None:
+            options[key] = getattr(args, key)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ViewOrderWarning)
         lf, meta = read_lightfield_with_metadata(args.input, **options)
@@ -118,6 +121,8 @@ def _path_argument(text: str):
     """
     from .path import PRESETS, preset_path, read_path_json
 
+    if Path(text).is_dir():
+        raise CLIError(f"--path {text!r} is a folder: give a path .json file or a preset such as linear:3")
     if Path(text).suffix.lower() == ".json" or Path(text).exists():
         return read_path_json(text)
     name, *rest = text.split(":")
@@ -136,6 +141,8 @@ def _path_argument(text: str):
         rotation = float(rest[2]) if len(rest) > 2 else None
     except ValueError:
         raise CLIError(f"--path {text!r}: expected PRESET[:EXTENT[:SEED]] or shake6:EXTENT:SEED:ROTATION") from None
+    if not 0 <= seed <= MAX_SEED:
+        raise CLIError(f"--path {text!r}: the SEED must be a whole number from 0 to 2**63 - 1")
     return preset_path(name, extent=extent, seed=seed, rotation=rotation), {}
 
 
@@ -195,7 +202,7 @@ def _add_deblur(sub):
                         "With the views' zero disparity on the focal plane, it is about the disparity of the "
                         "farthest content (sky, a far wall); the blind solver cannot estimate it (see "
                         "docs/blind.md)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--max-memory", type=gib, default=None, metavar="GIB",
                    help="memory the run may use on its device, in GiB (default: what it has free); with less "
                         "than it needs, the light field is restored in tiles")
@@ -296,9 +303,11 @@ def _deconvolve_command(args, path_file) -> str:
     words = ["lfdeblur", "deconvolve", args.input, str(path_file), "OUTPUT"]
     if args.swap_views:
         words.append("--swap-views")
-    if args.angular_crop is not None:
-        crop = args.angular_crop
-        words += ["--angular-crop", ",".join(map(str, crop)) if isinstance(crop, tuple) else str(crop)]
+    for option, key in (("--layout", "layout"), ("--grid", "grid"), ("--angular-size", "angular_size"),
+                        ("--angular-crop", "angular_crop")):
+        value = getattr(args, key)
+        if value is not None:
+            words += [option, ",".join(map(str, value)) if isinstance(value, tuple) else str(value)]
     if args.value_range is not None:  # one word, so that a negative LO is not read as an option
         vr = args.value_range
         words.append("--value-range=" + (vr if isinstance(vr, str) else ",".join(repr(float(v)) for v in vr)))
@@ -337,25 +346,13 @@ def _add_info(sub):
     p = sub.add_parser("info", help="describe a light field (layout, shape, dtype, value range, metadata), a "
                        "camera path .json (motion, extent, rotation) or a batch output folder (items, failures)")
     _input_argument(p, "light field file or folder, camera path .json, or lfdeblur batch output folder")
-    p.add_argument("--layout", default=None, help="override the detected layout (views, hci, stanford, eslf, "
-                   "mosaic, mat, h5, npy, npz, tiff)")
-    p.add_argument("--grid", default=None, help="V,U view grid (mosaic layout)")
-    p.add_argument("--angular-size", type=int, default=None, help="lenslet size A (eslf layout)")
 
 
 def _run_info(args):
     if describes(args.input):  # a camera path file, a batch output folder
         print("\n".join(describe(args.input)))
         return
-    options = {"layout": args.layout}
-    if args.grid:
-        try:
-            options["grid"] = tuple(int(g) for g in args.grid.replace("x", ",").split(","))
-        except ValueError:
-            raise CLIError(f"--grid {args.grid!r}: expected V,U such as 9,9") from None
-    if args.angular_size:
-        options["angular_size"] = args.angular_size
-    lf, meta = _read(args, **options)
+    lf, meta = _read(args)
     print("\n".join(describe_lightfield(lf, meta, stretched=args.value_range is not None)))
 
 
@@ -432,7 +429,8 @@ def _run_deconvolve(args):
         bar.n = rec.iteration
         d = rec.info.get("relative_decrease")
         stop = f", decrease {d:.1e} (stops below {args.tol:g})" if d is not None and args.tol > 0 else ""
-        bar.set_postfix_str(f"{rec.stage} loss={rec.loss:.4g}{stop}", refresh=False)
+        loss = f" loss={rec.loss:.4g}" if rec.loss == rec.loss else ""  # the in-plane solve states none (NaN)
+        bar.set_postfix_str(f"{rec.stage}{loss}{stop}", refresh=False)
         bar.refresh()
 
     try:

@@ -68,8 +68,8 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 import torch
 
-from ._lightfield import check_int, check_number, validate_lightfield
-from ._params import JsonParams
+from ._lightfield import check_infinity_disparity, check_int, check_number, validate_lightfield
+from ._params import JsonParams, check_bool
 from .progress import Progress, run_to_completion
 from .blur import BlurOperator, from_tensor, to_tensor, validate_frame
 from .devices import select_device
@@ -212,10 +212,8 @@ class DeconvolutionParams(JsonParams):
         object.__setattr__(self, "axis_weights", aw)
         if self.angular not in ANGULAR:
             raise ValueError(f"unknown angular differences {self.angular!r}: choose one of {', '.join(ANGULAR)}")
-        object.__setattr__(self, "isotropic", bool(self.isotropic))
-        object.__setattr__(self, "couple_channels", bool(self.couple_channels))
-        object.__setattr__(self, "clip", bool(self.clip))
-        object.__setattr__(self, "saturation", bool(self.saturation))
+        for name in ("isotropic", "couple_channels", "clip", "saturation"):
+            check_bool(self, name, name)
 
     def effective_weight(self, method: str, sigma: float | None = None, n_channels: int = 1) -> float:
         """The weight used by ``method``.
@@ -378,6 +376,7 @@ def iter_deconvolve(
     method = _choose_method(p.method, cp, d_inf)
     dev = select_device(device)
     frame = validate_frame(frame, arr.shape)
+    check_infinity_disparity(d_inf, arr.shape if frame is None else (*arr.shape[:2], *frame[2:]))  # whole views
     return _run(arr, cp, n_times, d_inf, p, method, dev, init, frame)
 
 
@@ -447,7 +446,7 @@ def deconvolve(
     n_times : int, default 32
         Exposure instants ``T`` of the blur model.
     infinity_disparity : float, default 0.0
-        ``d_inf`` in px/view.
+        ``d_inf`` in px/view, within the bound of :func:`~napari_lfdeblur.blur.simulate_blur`.
     params : DeconvolutionParams or dict, optional
         Solver parameters; single fields may also be given as keywords
         (``method=``, ``weight=``, ``n_iter=``, ``tol=``, ``isotropic=``,
@@ -470,9 +469,10 @@ def deconvolve(
     Raises
     ------
     ValueError
-        On a malformed light field or path, mismatched shapes, NaN, a
-        negative weight, an unknown method or kind of angular differences,
-        or ``'inplane'`` for a path that is not in-plane.
+        On a malformed light field or path, mismatched shapes, NaN, an
+        infinity disparity beyond the views' size, a negative weight, an
+        unknown method or kind of angular differences, or ``'inplane'`` for
+        a path that is not in-plane.
 
     Examples
     --------

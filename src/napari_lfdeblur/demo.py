@@ -190,7 +190,12 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     dict
         The summary also written to ``summary.json``.
     """
+    from .devices import select_device
+
+    select_device(device)  # an unusable device: an error before the folder is made
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out} is a file; the demo writes into a folder")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(0)
     summary = {

@@ -88,6 +88,8 @@ def _register(ref: np.ndarray, moving: np.ndarray, n_refine: int = 4) -> np.ndar
     from scipy import ndimage
     from skimage.registration import phase_cross_correlation
 
+    if np.ptp(ref) == 0 or np.ptp(moving) == 0:  # a flat view has nothing to register (and skimage warns)
+        return np.zeros(2)
     shift = np.asarray(phase_cross_correlation(ref, moving, upsample_factor=10, normalization=None)[0], float)
     for _ in range(n_refine):
         m = ndimage.shift(moving, shift, order=3, mode="nearest")

@@ -251,16 +251,20 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
 
     The fields the package reads back are ``n_times``, ``infinity_disparity``
     and ``view_shape``, the ``(Y, X)`` of the views the path belongs to
-    (:func:`path_view_mismatch`). The file is written to a temporary name
-    and renamed, so a failure leaves no half-written file. An existing file
-    is kept unless ``overwrite``.
+    (:func:`path_view_mismatch`); they are checked here as they are when
+    read. The file is written to a temporary name and renamed, so a failure
+    leaves no half-written file. An existing file is kept unless
+    ``overwrite``.
 
     Raises
     ------
     FileExistsError
         If the file exists and ``overwrite`` is False.
+    FileNotFoundError
+        If its folder does not exist.
     ValueError
-        On malformed control points or ``view_shape``.
+        On malformed control points, ``n_times`` (a whole number >= 2),
+        ``infinity_disparity`` (finite) or ``view_shape``.
 
     Examples
     --------
@@ -270,16 +274,20 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
     >>> read_path_json(f)[1]["view_shape"]
     [376, 541]
     """
-    cp = validate_control_points(control_points)
-    if "view_shape" in extra:
-        from .io._write import check_path_field
+    from .io._write import PATH_FIELDS, check_path_field
 
-        shape = extra["view_shape"]
-        extra["view_shape"] = list(check_path_field("view_shape", list(shape) if np.ndim(shape) == 1 else shape,
-                                                    "the path"))
+    cp = validate_control_points(control_points)
+    for key in PATH_FIELDS:
+        if extra.get(key) is not None:
+            value = extra[key]
+            value = list(value) if key == "view_shape" and np.ndim(value) == 1 else value
+            value = check_path_field(key, value, "the path")
+            extra[key] = list(value) if key == "view_shape" else value
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"cannot write {path}: the folder {path.parent} does not exist")
     units = "p_x, p_y in views; p_z in views per unit of normalised x~"
     if cp.shape[1] == 6:
         units += "; r_x, r_y, r_z in radians"

@@ -126,8 +126,14 @@ def simulate_dataset(inputs, out_dir, *, n_per_input: int = 1, path_kind: str = 
         raise ValueError(f"n_per_input must be an integer >= 1; got {n_per_input!r}")
     import numpy as np
 
-    draw_path(path_kind, extent, np.random.default_rng(0))  # bad kind or extent: fail before starting
+    from .._lightfield import check_int, check_number
+
+    draw_path(path_kind, extent, np.random.default_rng(0))  # bad arguments: fail before starting, not per item
     item_seed(seed, "", 0)
+    if check_number(noise, "noise") < 0:
+        raise ValueError(f"noise must be >= 0; got {noise!r}")
+    infinity_disparity = check_number(infinity_disparity, "infinity_disparity")
+    n_times = check_int(n_times, "n_times", 2)
     paths = expand_inputs(inputs)
     out_dir = Path(out_dir)
     extent = list(extent) if isinstance(extent, (tuple, list)) else float(extent)
@@ -174,6 +180,7 @@ def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float | Non
     -------
     BatchReport
     """
+    from .._lightfield import check_number
     from ..blind import BlindParams
 
     if params is None or isinstance(params, str):
@@ -186,7 +193,7 @@ def deblur_many(inputs, out_dir, *, params=None, infinity_disparity: float | Non
     paths = expand_inputs(inputs)
     out_dir = Path(out_dir)
     reading = _reading(value_range)
-    d_inf = None if infinity_disparity is None else float(infinity_disparity)  # None: each input's own
+    d_inf = None if infinity_disparity is None else check_number(infinity_disparity, "infinity_disparity")
     parameters = {"params": json.loads(params.to_json()), "infinity_disparity": d_inf, **reading}
     version = _version()
     specs = [make_spec("deblur", p, 0, out_dir / f"{_stem(p)}.npz",

@@ -299,10 +299,16 @@ def run_batch(specs: list, out_dir: Path, *, client, workers, device, card: dict
         raise RuntimeError(_MAIN_GUARD)
     if device not in ("auto", "cpu", "cuda"):
         raise ValueError(f"device must be 'auto', 'cpu' or 'cuda'; got {device!r}")
+    if device == "cuda" and client is None:  # the embedded cluster runs here: no GPU, no run
+        from ..devices import select_device
+
+        select_device(device)
     outputs = [Path(s["output"]).name for s in specs]
     if len(set(outputs)) < len(outputs):
         dup = sorted({o for o in outputs if outputs.count(o) > 1})
         raise ValueError(f"several inputs would write {', '.join(dup[:3])}: rename them")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise NotADirectoryError(f"{out_dir} is a file; a batch writes into a folder")
     out_dir.mkdir(parents=True, exist_ok=True)
     check_card(out_dir)
     with open_manifest(out_dir) as manifest:

@@ -97,6 +97,7 @@ import torch
 
 from .. import devices
 from .._lightfield import BRIGHT_LIMIT, brightest, check_number
+from .._lightfield import check_infinity_disparity as _check_infinity_disparity
 from .._memory import release_host_memory
 from ..blur import validate_lightfield
 from ..epi import warn_if_transposed
@@ -269,6 +270,8 @@ def iter_blind_deblur(
     p = _make_params(params, overrides)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be an integer; got {seed!r}")
+    if not 0 <= seed < 2**63:
+        raise ValueError(f"seed must be a whole number from 0 to 2**63 - 1; got {seed}")
     windows = check_windows(windows, arr.shape, p)
     cap = check_max_memory(max_memory)
     if check_view_order:
@@ -310,12 +313,10 @@ def _validate_input(blurred, infinity_disparity):
 def check_infinity_disparity(infinity_disparity, shape) -> float:
     """``infinity_disparity`` as a float, checked against the light field's ``shape`` (V, U, Y, X[, C]).
 
-    The bound: ``|d_inf| * (max(V, U) - 1) / 2`` (the refocus of the
-    outermost view, whose offset from the centre is ``(max(V, U) - 1) / 2``
-    views) must not exceed half the smaller spatial size, ``min(Y, X) / 2``:
-    beyond it, more than half of the outermost views' samples fall outside
-    the view and are clamped to its border, and the model no longer sees the
-    scene there.
+    :func:`~napari_lfdeblur._lightfield.check_infinity_disparity` (finite,
+    and within what the views' size allows), which ``simulate_blur`` and
+    ``deconvolve`` apply too; ``'auto'`` gets a ValueError that says why it
+    is not offered.
 
     Raises
     ------
@@ -326,15 +327,7 @@ def check_infinity_disparity(infinity_disparity, shape) -> float:
     """
     if isinstance(infinity_disparity, str) and infinity_disparity.strip().lower() == "auto":
         raise ValueError(AUTO_MESSAGE)
-    d_inf = check_number(infinity_disparity, "infinity_disparity")
-    V, U, Y, X = shape[:4]
-    half = (max(V, U) - 1) / 2.0
-    if abs(d_inf) * half > min(Y, X) / 2.0:
-        raise ValueError(
-            f"infinity_disparity = {d_inf:g} px/view is beyond what {Y} x {X} views allow: the outermost view "
-            f"would be shifted by {abs(d_inf) * half:g} px, more than half the view; |infinity_disparity| must "
-            f"be at most {min(Y, X) / (2.0 * half):g}")
-    return d_inf
+    return _check_infinity_disparity(infinity_disparity, shape)
 
 
 def _make_params(params, overrides) -> BlindParams:

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._params import JsonParams, check_float, check_int
+from .._params import JsonParams, check_bool, check_float, check_int
 from ..deconvolution import DeconvolutionParams
 
 __all__ = ["METHODS", "MOTIONS", "LatentParams", "PathFitParams", "RotationFitParams", "JointParams", "BlindParams",
@@ -30,7 +30,7 @@ def _check(obj, prefix: str, ints=None, nonneg=(), positive=(), signed=(), unit=
         if getattr(obj, name) > 1:
             raise ValueError(f"{prefix}.{name} must be in (0, 1]; got {getattr(obj, name)}")
     for name in bools:
-        object.__setattr__(obj, name, bool(getattr(obj, name)))
+        check_bool(obj, name, f"{prefix}.{name}")
 
 
 @dataclass(frozen=True)

@@ -281,6 +281,14 @@ def read_lightfield_with_metadata(path, *, layout: str | None = None, value_rang
     for key in ("control_points", *PATH_FIELDS):
         if isinstance(saved, dict) and key in saved and key not in metadata:
             metadata[key] = saved[key]
+    if "control_points" in metadata:  # stored in the file: read like a path file beside it
+        from ..path import validate_control_points
+
+        try:
+            metadata["control_points"] = validate_control_points(metadata["control_points"]).tolist()
+        except (ValueError, TypeError) as exc:
+            warnings.warn(f"{path}: the camera path it holds was not read: {exc}", stacklevel=2)
+            del metadata["control_points"]
     if "control_points" not in metadata:
         _read_path_beside(path, metadata)
     _check_view_order(lf, path, metadata)
@@ -294,7 +302,10 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     that hold no path themselves. Its ``control_points`` (and the
     ``n_times`` and ``infinity_disparity`` it states) go to the top level,
     its name to ``path_file``. A file there that holds no valid path is
-    ignored with a warning: the light field is read all the same. A path
+    ignored with a warning: the light field is read all the same. One that
+    names (``lightfield``) another light field of the same name that is
+    there too (``a.npz``'s beside ``a.npy``: both would read ``a.path.json``)
+    is that one's and is left alone. A path
     file that states views of another size than the light field's (it was
     cropped, say) is read with a warning when the path has ``p_z`` or a
     rotation (:func:`~napari_lfdeblur.path.path_view_mismatch`).
@@ -309,6 +320,10 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
         return
     try:
         doc = json.loads(beside.read_text())
+        named = Path(str(doc.get("lightfield", path.name))) if isinstance(doc, dict) else Path(path.name)
+        sibling = named.name != path.name and path_json_beside(named) == Path(beside.name)
+        if sibling and (path.parent / named).exists():
+            return  # the path of a.npz, beside a.npy
         cp = validate_control_points(doc.get("control_points") if isinstance(doc, dict) else doc)
     except (OSError, ValueError, TypeError) as exc:
         warnings.warn(f"{beside} was not read as the light field's camera path: {exc}", stacklevel=3)

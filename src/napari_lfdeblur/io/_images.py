@@ -96,9 +96,10 @@ def read_image(path) -> np.ndarray:
     except (PNGError, Exception) as exc:  # noqa: BLE001 - any decoder failure
         if isinstance(exc, FileNotFoundError):
             raise
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""  # not the decoder's install advice
         raise LightFieldReadError(
             f"{path}: cannot decode the image; it is truncated, corrupt or not an image "
-            f"({type(exc).__name__}: {exc})"
+            f"({type(exc).__name__}: {first})"
         ) from None
     img = np.asarray(img)
     if img.ndim == 0 or img.size == 0:

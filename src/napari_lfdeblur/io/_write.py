@@ -139,7 +139,7 @@ def _write_tiff(path, data, meta, cp, *, overwrite, compress):
         tifffile.imwrite(
             tmp,
             data,
-            photometric="rgb" if data.ndim == 5 else "minisblack",
+            photometric="rgb" if data.ndim == 5 and data.shape[4] in (3, 4) else "minisblack",
             compression="zlib" if compress else None,
             metadata={"lfdeblur_axes": "vuyxc"[: data.ndim], METADATA_KEY: json.dumps(meta)},
         )
@@ -301,7 +301,11 @@ def write_lightfield(
         :func:`napari_lfdeblur.path.save_path_json` (``<name>.path.json``, or
         ``path.json`` inside a views folder), and embedded in ``.npz``/``.h5``.
         The path JSON also states ``n_times`` and ``infinity_disparity`` when
-        ``metadata`` holds them.
+        ``metadata`` holds them, and beside a file the name of that file
+        (``lightfield``): ``a.npy`` and ``a.npz`` would share
+        ``a.path.json``, and a reader leaves it to the file it names while
+        that file is there. Replacing a file without a path removes the
+        path JSON that named it.
     compress : bool
         Compress ``.npz``, TIFF and HDF5 data (lossless).
 
@@ -315,8 +319,9 @@ def write_lightfield(
     FileExistsError
         If the destination exists and ``overwrite`` is False.
     LightFieldFormatError
-        If ``lf`` is not a light field or contains NaN/Inf, or the format
-        cannot be told from the suffix.
+        If ``lf`` is not a light field or contains NaN/Inf, the format
+        cannot be told from the suffix, or it has 2 channels and the format
+        is an image (views, mosaic, ESLF: images hold 1, 3 or 4 channels).
     ValueError
         On an unknown ``layout`` or ``bit_depth``, or ``bit_depth=32`` for PNG.
     """
@@ -325,6 +330,10 @@ def write_lightfield(
     if bit_depth not in (None, 8, 16, 32):
         raise ValueError(f"bit_depth must be 8, 16 or 32 (float), not {bit_depth!r}")
     arr = _float_lightfield(lf, path)
+    if layout in ("views", "mosaic", "eslf") and arr.ndim == 5 and arr.shape[4] == 2:
+        raise LightFieldFormatError(f"cannot write {path} as images ({layout}): an image holds 1, 3 or 4 channels, "
+                                    "and this light field has 2 (a second one would be read as transparency); "
+                                    "write it as .npz, .npy, .h5 or .tif")
 
     cp = None
     if control_points is not None:
@@ -352,5 +361,19 @@ def write_lightfield(
     if sidecar is not None:
         from ..path import save_path_json
 
-        save_path_json(sidecar, cp, overwrite=overwrite, **_path_fields(meta))
+        save_path_json(sidecar, cp, overwrite=overwrite, **_path_fields(meta), lightfield=path.name)
+    else:
+        _remove_stale_path(path)
     return path
+
+
+def _remove_stale_path(path: Path) -> None:
+    """Remove ``<name>.path.json`` beside the file ``path`` when it names ``path`` (what was replaced had it)."""
+    beside = path_json_beside(path)
+    if path.is_file() and beside.is_file():
+        try:
+            doc = json.loads(beside.read_text())
+        except (OSError, ValueError):
+            return
+        if isinstance(doc, dict) and doc.get("lightfield") == path.name:
+            beside.unlink()
