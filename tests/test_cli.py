@@ -555,3 +555,16 @@ def test_a_file_whose_own_path_is_malformed_is_read_with_a_warning(tmp_path, cap
     np.save(tmp_path / "zeros.npy", np.zeros((5, 5, 16, 16), np.float32))  # flat views: nothing to register
     assert main(["info", str(tmp_path / "zeros.npy")]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_running_out_of_memory_is_one_line(lf_file, tmp_path, capsys, monkeypatch):
+    import napari_lfdeblur.cli as cli
+
+    def simulate(args):
+        raise MemoryError("Unable to allocate 119. GiB for an array with shape (9, 9, 376, 541, 3)")
+
+    monkeypatch.setattr(cli, "_run_simulate", simulate)
+    _, src = lf_file
+    assert main(["simulate", str(src), str(tmp_path / "b.npz"), "--path", "linear:2"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error: out of memory (Unable to allocate 119. GiB" in err
