@@ -489,8 +489,8 @@ def main(argv=None) -> int:
         print(f"lfdeblur {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except MemoryError as exc:  # numpy's names the array it could not allocate
-        print(f"lfdeblur {args.command}: error: out of memory ({exc or 'the work does not fit'}); try a smaller input, "
-              "fewer instants (--n-times) or, for deblur, --max-memory", file=sys.stderr)
+        print(f"lfdeblur {args.command}: error: out of memory ({exc or 'the work does not fit'}); try a smaller "
+              "input, fewer instants (--n-times) or, for deblur, --max-memory", file=sys.stderr)
         return 1
     return status or 0
 
