@@ -12,12 +12,17 @@ __all__ = ["angular_crop", "fraction", "gib", "seed", "value_range", "view_grid"
 MAX_SEED = 2**63 - 1
 
 
+def _whole_numbers(text: str) -> tuple:
+    """``A,B,...`` (or ``AxB``) as a tuple of ints; ``()`` when a part is not one."""
+    try:
+        return tuple(int(n) for n in text.replace("x", ",").split(","))
+    except ValueError:
+        return ()
+
+
 def angular_crop(text: str):
     """``--angular-crop``: ``N`` or ``NV,NU``."""
-    try:
-        sizes = tuple(int(n) for n in text.replace("x", ",").split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected N or NV,NU such as 9 or 9,9") from None
+    sizes = _whole_numbers(text)
     if len(sizes) not in (1, 2):
         raise argparse.ArgumentTypeError(f"{text!r}: expected N or NV,NU such as 9 or 9,9")
     return sizes[0] if len(sizes) == 1 else sizes
@@ -47,10 +52,7 @@ def gib(text: str) -> int:
 
 def view_grid(text: str) -> tuple:
     """``--grid``: ``V,U`` (or ``VxU``), the views of a mosaic."""
-    try:
-        sizes = tuple(int(n) for n in text.replace("x", ",").split(","))
-    except ValueError:
-        sizes = ()
+    sizes = _whole_numbers(text)
     if len(sizes) != 2 or min(sizes) < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: expected V,U such as 9,9")
     return sizes
