@@ -106,6 +106,30 @@ def test_simulate_adds_blurred_and_path_layers(make_napari_viewer, qtbot, lf, no
     np.testing.assert_allclose(path.data[1][:, 1], 7.5 + s * pos[:, 0])
 
 
+def test_results_never_replace_a_layer_the_widgets_did_not_make(make_napari_viewer, qtbot, lf):
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+
+    viewer = make_napari_viewer()
+    src = viewer.add_image(lf.copy(), name="sharp")
+    points = viewer.add_points([[3.0, 3.0]], name="sharp blurred")  # the user's layers, named as the results
+    mine = viewer.add_image(np.ones((3, 3, 8, 8), np.float32), name="sharp blurred path")
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.layer_combo.set_layer(src)
+    w.form.n_times.value = 8
+    assert w.run() is not None
+    _wait_done(qtbot, w)
+    assert viewer.layers["sharp blurred"] is points and viewer.layers["sharp blurred path"] is mine
+    np.testing.assert_array_equal(mine.data, 1.0)
+    blurred = viewer.layers["sharp blurred [1]"]  # napari's next free name
+    np.testing.assert_allclose(blurred.data, simulate_blur(lf, w.table.control_points(), n_times=8), atol=1e-6)
+    # the widget's own result is updated in place by the next run, not added again
+    w.form.n_times.value = 4
+    assert w.run() is not None
+    _wait_done(qtbot, w)
+    assert viewer.layers["sharp blurred [1]"] is blurred and len(viewer.layers) == 5
+    np.testing.assert_allclose(blurred.data, simulate_blur(lf, w.table.control_points(), n_times=4), atol=1e-6)
+
+
 def test_simulate_random_path_is_seeded(make_napari_viewer, lf):
     from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
     from napari_lfdeblur.path import random_path
@@ -914,6 +938,24 @@ def test_blind_restore_anyway_reaches_the_params(make_napari_viewer, monkeypatch
     w.form.preset.value = "default"
     assert w.form.light_restoration.value == 0.5
     assert not [n for n in notifications if n[0] == "error"], notifications
+
+
+def test_blind_true_path_follows_the_input_and_an_odd_t_only_changes_its_drawing(make_napari_viewer, monkeypatch,
+                                                                                    lf, notifications):
+    _fake_blind_solver(monkeypatch)
+    viewer, layer, cp, w = _blind_dock(make_napari_viewer, lf)
+    assert w.form.true_path.value is layer  # taken from the input's metadata
+    layer.metadata["n_times"] = None  # as a file may state it: drawn with T = 32, and the run goes on
+    w.run_and_wait(timeout=60)
+    assert not [n for n in notifications if n[0] == "error"], notifications
+    assert "b deblurred (blind)" in viewer.layers
+    other = viewer.add_image(lf.copy(), name="other")  # states no path: the previous input's is not its truth
+    w.layer_combo.set_layer(other)
+    assert w.form.true_path.value is None
+    truth = viewer.add_image(lf.copy(), name="truth", metadata={"control_points": cp.tolist()})
+    w.form.true_path.set_layer(truth)  # chosen by hand: kept when the input changes
+    w.layer_combo.set_layer(viewer.add_image(lf.copy(), name="third"))
+    assert w.form.true_path.value is truth
 
 
 def test_widgets_take_the_infinity_disparity_a_layer_states(make_napari_viewer, lf, notifications):

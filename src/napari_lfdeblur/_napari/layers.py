@@ -52,6 +52,7 @@ Camera path
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
@@ -428,16 +429,25 @@ def epi_layer_data(lf, which: str, *, name: str, v=None, u=None, y=None, x=None,
 # --------------------------------------------------------------- viewer
 
 
+#: the layers :func:`add_layer` made with ``replace``: the only ones a later call may update or remove
+_REPLACEABLE = weakref.WeakSet()
+
+
 def add_layer(viewer, layer_data, *, replace: bool = True):
     """Add a layer data tuple to ``viewer``; return the layer.
 
-    With ``replace`` (default) a layer of the same name and type is updated
-    in place (data, metadata and placement) instead of adding a second one.
+    With ``replace`` (default) a layer of the same name that an earlier call
+    with ``replace`` made (a previous result) is updated in place (data,
+    metadata and placement) when it is of the same type, else removed and
+    added again. Any other layer of that name (the user's, or one a reader
+    or the *Open* widget added) is left as it is: the new layer gets
+    napari's next free name (``'name [1]'``), which the next call updates.
     """
     data, kwargs, layer_type = layer_data
     name = kwargs.get("name")
-    if replace and name in viewer.layers:
-        layer = viewer.layers[name]
+    previous = [layer for layer in viewer.layers if layer in _REPLACEABLE and _named(layer.name, name)]
+    if replace and previous:
+        layer = previous[0]
         if layer_kind(layer) == layer_type and _compatible(layer, data, kwargs):
             if layer_type == "shapes":
                 layer.data = []
@@ -453,7 +463,18 @@ def add_layer(viewer, layer_data, *, replace: bool = True):
             layer.metadata = kwargs.get("metadata", {})
             return layer
         viewer.layers.remove(layer)
-    return getattr(viewer, f"add_{layer_type}")(data, **kwargs)
+    layer = getattr(viewer, f"add_{layer_type}")(data, **kwargs)
+    if replace:
+        _REPLACEABLE.add(layer)
+    return layer
+
+
+def _named(actual: str, name) -> bool:
+    """Whether a layer called ``actual`` is one asked to be called ``name`` (napari adds ``' [k]'`` to a taken name)."""
+    if not isinstance(name, str) or not actual.startswith(name):
+        return False
+    rest = actual[len(name):]
+    return rest == "" or (rest.startswith(" [") and rest.endswith("]") and rest[2:-1].isdigit())
 
 
 def _compatible(layer, data, kwargs) -> bool:
@@ -464,6 +485,8 @@ def _compatible(layer, data, kwargs) -> bool:
 
 
 def remove_layer(viewer, name: str) -> None:
-    """Remove the layer called ``name`` when there is one."""
-    if name in viewer.layers:
-        viewer.layers.remove(name)
+    """Remove the layer that :func:`add_layer` (with ``replace``) made as ``name``, when there is one."""
+    for layer in list(viewer.layers):
+        if layer in _REPLACEABLE and _named(layer.name, name):
+            viewer.layers.remove(layer)
+            return

@@ -211,12 +211,18 @@ class BlindDeblurWidget(SolverWidget):
         self.form.light_restoration.enabled = not self.form.restore_anyway.value
 
     def _input_changed(self, *_):
-        """Take the true path and the infinity disparity the chosen layer states, where it states them."""
+        """Take the true path and the infinity disparity the chosen layer states, where it states them.
+
+        A true path taken from the previous input is dropped when the new one states none.
+        """
         layer = self.layer_combo.value
         if layer is None:
             return
         if has_path(layer):
             self.form.true_path.set_layer(layer)
+            self._true_from_input = layer
+        elif self.form.true_path.value is not None and self.form.true_path.value is getattr(self, "_true_from_input", 0):
+            self.form.true_path.value = None
         if "infinity_disparity" in layer.metadata:
             set_stated(self.form.infinity_disparity, layer.metadata["infinity_disparity"],
                        f"{self.title}: layer {layer.name!r}")
@@ -231,6 +237,8 @@ class BlindDeblurWidget(SolverWidget):
         from ...path import canonical_time_direction
         from ...path import center_path
 
+        from ...io._write import check_path_field
+
         layer = self.form.true_path.value
         if layer is None:
             return None
@@ -238,7 +246,10 @@ class BlindDeblurWidget(SolverWidget):
             cp = control_points_from_layer(layer)
         except LayerError:
             return None
-        n_times = int(layer.metadata.get("n_times", 32))
+        try:  # drawn for comparison only: an odd T stated in the layer falls back to the default
+            n_times = check_path_field("n_times", layer.metadata.get("n_times", 32), "the true path's layer")
+        except ValueError:
+            n_times = 32
         return canonical_time_direction(center_path(cp, n_times))
 
     def preview_name(self) -> str:
