@@ -967,3 +967,11 @@ def test_cli_angular_crop(tmp_path, lf_rgb, capsys):
     with pytest.raises(SystemExit):
         main(["info", str(tmp_path / "a.npy"), "--angular-crop", "three"])
     assert "expected N or NV,NU" in capsys.readouterr().err
+
+
+def test_a_file_holding_no_light_field_is_named_once_in_a_sentence(tmp_path):
+    np.save(tmp_path / "c7.npy", np.zeros((3, 3, 8, 8, 7), np.float32))
+    with pytest.raises(LightFieldFormatError) as exc:
+        read_lightfield(tmp_path / "c7.npy")
+    assert str(exc.value).startswith(f"{tmp_path / 'c7.npy'}: a colour light field must have 1 to 4 channels")
+    assert str(exc.value).count("c7.npy") == 1

@@ -261,7 +261,7 @@ def validate_lightfield(lf, path="light field") -> np.ndarray:
     are left to :func:`to_float01`, which counts them.
     """
     try:
-        lf = check_lightfield(lf, str(path), finite=False)
+        lf = check_lightfield(lf, "light field", finite=False)  # the message then names the file
     except ValueError as exc:
         raise LightFieldFormatError(f"{path}: {exc}") from None
     return lf[..., 0] if lf.ndim == 5 and lf.shape[-1] == 1 else lf

@@ -369,6 +369,8 @@ class BlindDeblurWidget(SolverWidget):
                 true_control_points=job["true"], infinity_disparity=d_inf, metadata={"kind": "rejected path"}))
             self.last_layers.append(rejected)
             note = f"; the path it rejected is in the layer '{rejected.name}', for 4D deconvolution"
+        else:  # an earlier run's rejected path is not this result's
+            remove_layer(self.viewer, f"{job['source']} rejected path")
         self.plot.plot(cp, job["true"], n_times=max(64, n_times))
         if meta["loss_history"] and len(meta["loss_history"]) != len(self.loss_plot.values):
             self.loss_plot.plot(meta["loss_history"], [])

@@ -76,7 +76,8 @@ def _fields() -> list:
                  tooltip=f"TV weight = {COLOUR_WEIGHT_FACTOR} x (colour TV) or {NOISE_WEIGHT_FACTOR} x (one TV per "
                          f"channel) the noise level estimated in the data, times {ANISOTROPIC_WEIGHT_SCALE} along the "
                          "disparity (inplane: 2e-3); untick to set the weight yourself"),
-        fspin("weight", 2e-3, 0.0, 10.0, 1e-5, tooltip="regularisation weight (TV or angular Tikhonov)"),
+        # 7 decimals: a small weight must not round to 0 (no regularisation); the arrows step by 1e-3
+        fspin("weight", 2e-3, 0.0, 10.0, 1e-7, tooltip="regularisation weight (TV or angular Tikhonov)"),
         spin("n_iter", 100, 1, 100000, label="iterations", tooltip="maximum iterations of the TV solver"),
         device_choice(),
     ]
