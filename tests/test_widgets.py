@@ -381,6 +381,25 @@ def test_epi_layers_follow_the_pick(make_napari_viewer, lf):
     assert len(viewer.layers) == 3  # updated in place, not added again
 
 
+def test_epis_follow_a_layer_whose_data_change(make_napari_viewer, lf):
+    from napari_lfdeblur._napari.widgets.epi import EpiPanel
+
+    viewer = make_napari_viewer()
+    layer = viewer.add_image(lf.copy(), name="lf")
+    panel = EpiPanel(viewer)
+    viewer.window.add_dock_widget(panel)
+    panel.layer_combo.set_layer("lf")
+    panel.set_pick(v=4, y=14, u=4, x=14)
+    panel.show_epis()
+    layer.data = lf[::-1].copy()  # a result updated in place: the EPIs on show are redrawn
+    np.testing.assert_array_equal(viewer.layers["lf EPI h"].data, lf[::-1][4, :, 14, :])
+    small = lf[:3, :3, :8, :8].copy()
+    layer.data = small  # smaller: the picks stay within it
+    assert (panel.v.value, panel.u.value, panel.y.value, panel.x.value) == (2, 2, 7, 7)
+    assert panel.v.max == 2 and panel.x.max == 7
+    np.testing.assert_array_equal(viewer.layers["lf EPI v"].data, small[:, 2, :, 7].T)
+
+
 def test_epi_pick_by_clicking(make_napari_viewer, lf):
     from types import SimpleNamespace
 

@@ -62,14 +62,35 @@ class EpiPanel(Container):
 
     def _layer_changed(self, *_):
         layer = self.layer_combo.value
+        watched = getattr(self, "_watched", None)
+        if watched is not None and watched is not layer:
+            watched.events.data.disconnect(self._data_changed)
+        self._watched = layer
         if layer is None:
+            return
+        layer.events.data.connect(self._data_changed)  # a result updated in place: other data, maybe other sizes
+        self._fit_picks(layer, middle=True)
+        self._active = False
+
+    def _fit_picks(self, layer, middle: bool) -> None:
+        """Set the picks' ranges to the layer's sizes: the picks at the middle, or kept within the ranges."""
+        if not is_lightfield(layer):
             return
         V, U, Y, X = layer.data.shape[:4]
         for box, n in ((self.v, V), (self.u, U), (self.y, Y), (self.x, X)):
             with box.changed.blocked():
+                value = n // 2 if middle else min(box.value, n - 1)
                 box.range = (0, n - 1)
-                box.value = n // 2
-        self._active = False
+                box.value = value
+
+    def _data_changed(self, *_):
+        """The chosen layer's data changed: the picks follow its sizes, and EPIs on show are redrawn."""
+        layer = self.layer_combo.value
+        if layer is None:
+            return
+        self._fit_picks(layer, middle=False)
+        if self._active:
+            self.show_epis()
 
     def set_pick(self, v=None, y=None, u=None, x=None) -> None:
         """Set the picked rows/columns (updates the EPI layers once shown)."""
