@@ -130,6 +130,23 @@ def test_results_never_replace_a_layer_the_widgets_did_not_make(make_napari_view
     np.testing.assert_allclose(blurred.data, simulate_blur(lf, w.table.control_points(), n_times=4), atol=1e-6)
 
 
+def test_results_lie_over_their_input(make_napari_viewer, qtbot, lf):
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+
+    viewer = make_napari_viewer()
+    src = viewer.add_image(lf.copy(), name="sharp", scale=(1, 1, 0.5, 0.25), translate=(0, 0, 10, -4))
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.layer_combo.set_layer(src)
+    w.form.n_times.value = 4
+    assert w.run() is not None
+    _wait_done(qtbot, w)
+    out, path = viewer.layers["sharp blurred"], viewer.layers["sharp blurred path"]
+    np.testing.assert_array_equal(out.scale, src.scale)
+    np.testing.assert_array_equal(out.translate, src.translate)
+    np.testing.assert_array_equal(path.scale, [0.5, 0.25])  # the path over the centre view: its (y, x)
+    np.testing.assert_array_equal(path.translate, [10, -4])
+
+
 def test_simulate_random_path_is_seeded(make_napari_viewer, lf):
     from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
     from napari_lfdeblur.path import random_path

@@ -52,6 +52,7 @@ Camera path
 
 from __future__ import annotations
 
+import re
 import weakref
 from typing import Any
 
@@ -471,10 +472,7 @@ def add_layer(viewer, layer_data, *, replace: bool = True):
 
 def _named(actual: str, name) -> bool:
     """Whether a layer called ``actual`` is one asked to be called ``name`` (napari adds ``' [k]'`` to a taken name)."""
-    if not isinstance(name, str) or not actual.startswith(name):
-        return False
-    rest = actual[len(name):]
-    return rest == "" or (rest.startswith(" [") and rest.endswith("]") and rest[2:-1].isdigit())
+    return isinstance(name, str) and re.fullmatch(re.escape(name) + r"( \[\d+\])?", actual) is not None
 
 
 def _compatible(layer, data, kwargs) -> bool:

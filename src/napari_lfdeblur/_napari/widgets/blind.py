@@ -48,7 +48,6 @@ from magicgui.widgets import CheckBox, ComboBox, Label
 from ...path import validate_control_points
 from ..layers import (
     LayerError,
-    add_layer,
     control_points_from_layer,
     layer_kind,
     lightfield_layer_data,
@@ -297,7 +296,7 @@ class BlindDeblurWidget(SolverWidget):
         if progress.preview is not None:
             data = lightfield_layer_data(progress.preview, name=self.preview_name(),
                                          metadata=lightfield_metadata(kind="preview"), opacity=1.0)
-            add_layer(self.viewer, data)
+            self.add_result(data)
             self.preview_updates += 1
         start = time.perf_counter()
         if start >= self._next_draw:
@@ -310,7 +309,7 @@ class BlindDeblurWidget(SolverWidget):
         self.loss_plot.plot(self.loss_plot.values, live=True)
         if progress.control_points is not None:
             self.plot.plot(progress.control_points, self._job["true"], live=True)
-            add_layer(self.viewer, path_layer_data(
+            self.add_result(path_layer_data(
                 progress.control_points, self._job["shape"], n_times=self._job["n_times"],
                 name=self.path_preview_name(), true_control_points=self._job["true"],
                 metadata={"kind": "path preview"}))
@@ -352,9 +351,9 @@ class BlindDeblurWidget(SolverWidget):
             meta["path_windows"] = [list(w) for w in result.info["windows"]]
         path_name = f"{job['source']} estimated path"
         self._adopt_previews(name, path_name)
-        out = add_layer(self.viewer, lightfield_layer_data(result.lightfield, name=name, metadata=meta))
+        out = self.add_result(lightfield_layer_data(result.lightfield, name=name, metadata=meta))
         d_inf = job["settings"]["infinity_disparity"]
-        path = add_layer(self.viewer, path_layer_data(
+        path = self.add_result(path_layer_data(
             cp, job["shape"], n_times=n_times, name=path_name, true_control_points=job["true"],
             infinity_disparity=d_inf))
         layers = self.viewer.layers
@@ -364,7 +363,7 @@ class BlindDeblurWidget(SolverWidget):
         info = getattr(result, "info", None) or {}
         note = ""
         if "rejected_path" in info:  # kept as a layer, for *4D deconvolution*: no need to estimate it again
-            rejected = add_layer(self.viewer, path_layer_data(
+            rejected = self.add_result(path_layer_data(
                 info["rejected_path"], job["shape"], n_times=n_times, name=f"{job['source']} rejected path",
                 true_control_points=job["true"], infinity_disparity=d_inf, metadata={"kind": "rejected path"}))
             self.last_layers.append(rejected)

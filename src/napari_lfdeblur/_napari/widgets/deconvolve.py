@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from magicgui.widgets import CheckBox, ComboBox
 
-from ..layers import add_layer, lightfield_layer_data, lightfield_metadata
+from ..layers import lightfield_layer_data, lightfield_metadata
 from ._controls import (
     INFINITY_DISPARITY_TIP,
     PathSource,
@@ -175,6 +175,6 @@ class DeconvolveWidget(SolverWidget):
             infinity_disparity=p["infinity_disparity"],
             source_layer=job["source"],
         )
-        out = add_layer(self.viewer, lightfield_layer_data(result, name=name, metadata=meta))
+        out = self.add_result(lightfield_layer_data(result, name=name, metadata=meta))
         self.last_layers = [out]
         self.epi.layer_combo.set_layer(out)

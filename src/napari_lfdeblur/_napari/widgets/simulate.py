@@ -23,7 +23,7 @@ from magicgui.widgets import ComboBox, Container, PushButton
 
 from ...path import MAX_ROTATION, preset_path, random_path
 from ...progress import Progress
-from ..layers import add_layer, lightfield_layer_data, lightfield_metadata, path_layer_data
+from ..layers import lightfield_layer_data, lightfield_metadata, path_layer_data
 from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, heading, spin, warn_view_mismatch
 from ._plots import PathPlot
 from ._runner import SolverWidget
@@ -133,10 +133,9 @@ class SimulateBlurWidget(SolverWidget):
             infinity_disparity=p["infinity_disparity"],
             source_layer=job["source"],
         )
-        out = add_layer(self.viewer, lightfield_layer_data(blurred, name=name, metadata=meta))
-        path = add_layer(self.viewer, path_layer_data(job["cp"], job["shape"], n_times=p["n_times"],
-                                                      infinity_disparity=p["infinity_disparity"],
-                                                      name=f"{name} path"))
+        out = self.add_result(lightfield_layer_data(blurred, name=name, metadata=meta))
+        path = self.add_result(path_layer_data(job["cp"], job["shape"], n_times=p["n_times"],
+                                               infinity_disparity=p["infinity_disparity"], name=f"{name} path"))
         self.last_layers = [out, path]
         self.plot.plot(job["cp"], n_times=p["n_times"])
         self.epi.layer_combo.set_layer(out)
