@@ -130,6 +130,26 @@ def test_results_never_replace_a_layer_the_widgets_did_not_make(make_napari_view
     np.testing.assert_allclose(blurred.data, simulate_blur(lf, w.table.control_points(), n_times=4), atol=1e-6)
 
 
+def test_simulate_refuses_bad_settings_before_it_runs(make_napari_viewer, lf, notifications):
+    import torch
+
+    from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
+
+    viewer = make_napari_viewer()
+    src = viewer.add_image(lf.copy(), name="sharp")
+    w = _dock(viewer, SimulateBlurWidget(viewer))
+    w.layer_combo.set_layer(src)
+    w.form.infinity_disparity.value = 19.0  # 5x5 views of 16x16 px: at most 4
+    assert w.run() is None and not w.is_running
+    assert notifications[-1][0] == "error" and "infinity_disparity = 19 px/view is beyond" in notifications[-1][1]
+    if not torch.cuda.is_available():
+        w.form.infinity_disparity.value = 0.0
+        w.form.device.value = "cuda"
+        assert w.run() is None
+        assert notifications[-1][0] == "error" and "no CUDA GPU" in notifications[-1][1]
+    assert "sharp blurred" not in viewer.layers
+
+
 def test_results_lie_over_their_input(make_napari_viewer, qtbot, lf):
     from napari_lfdeblur._napari.widgets.simulate import SimulateBlurWidget
 

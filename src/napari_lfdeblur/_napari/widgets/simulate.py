@@ -106,10 +106,14 @@ class SimulateBlurWidget(SolverWidget):
         return {k: v for k, v in self.form.asdict().items() if k != "layer"}
 
     def make_job(self, layer, lf):
+        from ..._lightfield import check_infinity_disparity
         from ...blur import simulate_blur
+        from ...devices import select_device
 
         cp = self.table.control_points()
         params = self.parameters()
+        check_infinity_disparity(params["infinity_disparity"], lf.shape)  # as the other widgets: before the run
+        select_device(params["device"])
         warn_view_mismatch(self.title, self.table, lf.shape)
         self._job = {"source": layer.name, "cp": cp, "params": params, "shape": lf.shape}
 
