@@ -542,6 +542,9 @@ def test_replace_merges_a_dict_into_the_current_sub_params_or_takes_an_instance(
         iter_blind_deblur(good, path={"path_steps": 3})
     with pytest.raises(TypeError, match="seed"):
         iter_blind_deblur(good, seed=1.5)
+    for bad in (-1, 2**63):  # torch's generators take 64-bit signed seeds
+        with pytest.raises(ValueError, match="seed must be a whole number from 0 to 2\\*\\*63 - 1"):
+            iter_blind_deblur(good, seed=bad)
 
 
 def test_paper_preset_is_the_published_settings():

@@ -6,10 +6,9 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ["angular_crop", "fraction", "gib", "seed", "value_range", "view_grid", "window", "MAX_SEED"]
+from ._lightfield import MAX_SEED
 
-#: seeds are whole numbers from 0 to this (torch's generators take 64-bit signed seeds)
-MAX_SEED = 2**63 - 1
+__all__ = ["angular_crop", "fraction", "gib", "seed", "value_range", "view_grid", "window"]
 
 
 def _whole_numbers(text: str) -> tuple:
@@ -59,7 +58,7 @@ def view_grid(text: str) -> tuple:
 
 
 def seed(text: str) -> int:
-    """``--seed``: a whole number from 0 to :data:`MAX_SEED`."""
+    """``--seed``: a whole number from 0 to :data:`~napari_lfdeblur._lightfield.MAX_SEED`."""
     try:
         value = int(text)
     except ValueError:

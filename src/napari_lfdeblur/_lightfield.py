@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 __all__ = ["check_int", "check_number", "check_infinity_disparity", "validate_lightfield", "brightest",
-           "DARK_LEVEL", "BRIGHT_LIMIT"]
+           "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
 
 #: A light field whose :func:`brightest` value is below this is dark: the blind solver's salient-edge
 #: weight is absolute, and dark data (10- or 12-bit values in a 16-bit file, a linear decode) show it few edges.
@@ -16,6 +16,9 @@ DARK_LEVEL = 0.25
 #: A light field that reaches this is not on the [0, 1] scale (noise and highlights overshoot 1 by far less):
 #: the blind solver, whose salient-edge weight is on that scale, refuses it rather than find no edges in it.
 BRIGHT_LIMIT = 2.0
+
+#: seeds are whole numbers from 0 to this (torch's generators take 64-bit signed seeds)
+MAX_SEED = 2**63 - 1
 
 
 def brightest(lf) -> float:

@@ -26,7 +26,8 @@ from ._cli_info import (
     stated_value,
     warn_view_mismatch,
 )
-from ._cli_types import MAX_SEED, angular_crop, fraction, gib, seed, value_range, view_grid, window
+from ._cli_types import angular_crop, fraction, gib, seed, value_range, view_grid, window
+from ._lightfield import MAX_SEED
 
 __all__ = ["main"]
 

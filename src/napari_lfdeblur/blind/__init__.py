@@ -96,7 +96,7 @@ import numpy as np
 import torch
 
 from .. import devices
-from .._lightfield import BRIGHT_LIMIT, brightest, check_number
+from .._lightfield import BRIGHT_LIMIT, MAX_SEED, brightest, check_number
 from .._lightfield import check_infinity_disparity as _check_infinity_disparity
 from .._memory import release_host_memory
 from ..blur import validate_lightfield
@@ -270,7 +270,7 @@ def iter_blind_deblur(
     p = _make_params(params, overrides)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be an integer; got {seed!r}")
-    if not 0 <= seed < 2**63:
+    if not 0 <= seed <= MAX_SEED:
         raise ValueError(f"seed must be a whole number from 0 to 2**63 - 1; got {seed}")
     windows = check_windows(windows, arr.shape, p)
     cap = check_max_memory(max_memory)
