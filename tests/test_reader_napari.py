@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from napari_lfdeblur.io import read_lightfield, write_lightfield
+from napari_lfdeblur.io import read_lightfield, read_lightfield_with_metadata, write_lightfield
 
 LYTRO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lytro-f01-img0001"
 
@@ -130,6 +130,29 @@ def test_writer_functions(tmp_path, lf_rgb):
         write_npz(str(tmp_path / "d.npz"), lf_rgb[0, 0], {"name": "img"})
     with pytest.raises(FileExistsError):
         write_npz(str(tmp_path / "a.npz"), lf_rgb, {"name": "again"})
+
+
+def test_writer_saves_a_layer_with_a_path_in_a_second_format(tmp_path, lf_rgb):
+    lf_gray = lf_rgb[..., 0]
+    # a.npz and a.tif would share a.path.json: the second keeps its path in itself, a.npz keeps its file
+    from napari_lfdeblur._napari.writer import write_npz, write_tiff
+
+    cp = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.0]])
+    attrs = {"name": "blur", "metadata": {"control_points": cp.tolist(), "n_times": 8}}
+    assert [Path(p).name for p in write_npz(str(tmp_path / "a"), lf_gray, attrs)] == ["a.npz", "a.path.json"]
+    before = (tmp_path / "a.path.json").read_text()
+    with pytest.warns(UserWarning, match="a.path.json belongs to a.npz and was left as it is; the camera path of "
+                                         "a.tif is stored in the file itself"):
+        assert [Path(p).name for p in write_tiff(str(tmp_path / "a"), lf_gray, attrs)] == ["a.tif"]
+    assert (tmp_path / "a.path.json").read_text() == before
+    for name in ("a.npz", "a.tif"):
+        meta = read_lightfield_with_metadata(tmp_path / name)[1]
+        np.testing.assert_allclose(meta["control_points"], cp)
+        assert meta["n_times"] == 8
+    # a format that cannot hold the path itself still refuses to take another file's path file
+    with pytest.raises(FileExistsError, match="a.path.json exists"):
+        write_lightfield(tmp_path / "a.npy", lf_gray, control_points=cp)
+    assert not (tmp_path / "a.npy").exists()
 
 
 # ------------------------------------------------------------------ viewer

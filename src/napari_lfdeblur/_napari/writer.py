@@ -4,7 +4,9 @@ One writer per format (``.npz``, ``.tif``, ``.h5``); each takes a single
 Image layer whose data is 4D ``(V, U, Y, X)`` (or 5D RGB) and writes it with
 :func:`napari_lfdeblur.io.write_lightfield` (float32, lossless, atomic).
 The layer's metadata goes with it; a camera path in
-``metadata['control_points']`` is also written as ``<name>.path.json``.
+``metadata['control_points']`` is also written as ``<name>.path.json``,
+unless that file is there for another format of the same name (the layer
+saved as ``.npz``, then as ``.tif``): the file keeps the path itself.
 A path layer (a Shapes layer holding ``metadata['control_points']``, as the
 widgets and the reader add them) is saved as a path JSON file.
 An existing file is never replaced: save under a new name.
@@ -17,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import PATH_FIELDS, write_lightfield
-from ..io._write import sidecar_path_json
+from ..io._write import path_json_owner, sidecar_path_json
 from ..path import save_path_json
 
 __all__ = ["write_npz", "write_tiff", "write_h5", "write_layer", "write_path_json"]
@@ -51,9 +53,10 @@ def write_layer(path: str, data, attributes: dict, suffix: str) -> list[str]:
     meta = dict(attributes.get("metadata") or {})
     cp = meta.pop("control_points", None)
     meta = {"layer_name": attributes.get("name"), **meta}  # made JSON-friendly by write_lightfield
+    owner = path_json_owner(p)  # a path file beside that is another file's is left to it
     written = write_lightfield(p, arr, metadata=meta, control_points=cp)
     out = [str(written)]
-    if cp is not None:
+    if cp is not None and owner is None:
         out.append(str(sidecar_path_json(Path(written), "npz")))
     return out
 

@@ -42,7 +42,7 @@ from ._common import (
     check_value_range,
     parse_value_range,
 )
-from ._write import PATH_FIELDS, path_json_beside, write_lightfield
+from ._write import PATH_FIELDS, path_json_beside, path_json_owner, write_lightfield
 
 __all__ = [
     "read_lightfield",
@@ -318,12 +318,10 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     beside = path_json_beside(path)
     if not beside.is_file():
         return
+    if path_json_owner(path) is not None:
+        return  # the path of a.npz, beside a.npy
     try:
         doc = json.loads(beside.read_text())
-        named = Path(str(doc.get("lightfield", path.name))) if isinstance(doc, dict) else Path(path.name)
-        sibling = named.name != path.name and path_json_beside(named) == Path(beside.name)
-        if sibling and (path.parent / named).exists():
-            return  # the path of a.npz, beside a.npy
         cp = validate_control_points(doc.get("control_points") if isinstance(doc, dict) else doc)
     except (OSError, ValueError, TypeError) as exc:
         warnings.warn(f"{beside} was not read as the light field's camera path: {exc}", stacklevel=3)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +79,25 @@ def path_json_beside(path) -> Path:
     if path.is_dir():
         return path / "path.json"
     return path.with_name(path.name[: -len(path.suffix)] + ".path.json" if path.suffix else path.name + ".path.json")
+
+
+def path_json_owner(path) -> Path | None:
+    """The other light field that ``<name>.path.json`` beside the file ``path`` belongs to, if it is there.
+
+    ``a.npy`` and ``a.npz`` share ``a.path.json``; the file names the light
+    field it was written for (``lightfield``). None when it names ``path``,
+    names nothing, cannot be read, or the file it names is gone.
+    """
+    path = Path(path)
+    beside = path_json_beside(path)
+    try:
+        doc = json.loads(beside.read_text())
+    except (OSError, ValueError):
+        return None
+    named = Path(str(doc.get("lightfield", path.name))) if isinstance(doc, dict) else Path(path.name)
+    if named.name != path.name and path_json_beside(named) == Path(beside.name) and (path.parent / named).exists():
+        return path.parent / named
+    return None
 
 
 def _layout_of(path: Path, layout: str | None) -> str:
@@ -259,6 +279,8 @@ def _write_views(path, data, meta, cp, *, overwrite):
 
 
 _ARRAY_WRITERS = {"npz": _write_npz, "npy": _write_npy, "tiff": _write_tiff, "h5": _write_h5}
+#: the layouts that store the camera path in the file itself (read back by ``read_lightfield_with_metadata``)
+_EMBEDS_PATH = ("npz", "tiff", "h5")
 
 
 def write_lightfield(
@@ -304,8 +326,11 @@ def write_lightfield(
         ``metadata`` holds them, and beside a file the name of that file
         (``lightfield``): ``a.npy`` and ``a.npz`` would share
         ``a.path.json``, and a reader leaves it to the file it names while
-        that file is there. Replacing a file without a path removes the
-        path JSON that named it.
+        that file is there. Such a path JSON is left as it is (with a
+        warning) when the new file keeps its path itself (``.npz``,
+        ``.tif``, ``.h5``) and ``overwrite`` is False; otherwise it is a
+        FileExistsError. Replacing a file without a path removes the path
+        JSON that named it.
     compress : bool
         Compress ``.npz``, TIFF and HDF5 data (lossless).
 
@@ -344,6 +369,10 @@ def write_lightfield(
     if cp is not None:
         meta["control_points"] = cp.tolist()
     sidecar = sidecar_path_json(path, layout) if cp is not None else None
+    owner = None
+    if sidecar is not None and layout in _EMBEDS_PATH and not overwrite:
+        owner = path_json_owner(path)  # a.path.json is a.npz's: a.tif keeps its path in itself only
+        sidecar = None if owner is not None else sidecar
     if sidecar is not None and layout != "views":
         check_writable(sidecar, overwrite)
 
@@ -362,6 +391,9 @@ def write_lightfield(
         from ..path import save_path_json
 
         save_path_json(sidecar, cp, overwrite=overwrite, **_path_fields(meta), lightfield=path.name)
+    elif owner is not None:
+        warnings.warn(f"{path_json_beside(path).name} belongs to {owner.name} and was left as it is; the camera "
+                      f"path of {path.name} is stored in the file itself", stacklevel=2)
     else:
         _remove_stale_path(path)
     return path
