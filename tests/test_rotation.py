@@ -254,6 +254,7 @@ def test_rotation_is_in_the_zero_mean_gauge_like_translation():
         (np.zeros((2, 4)), r"\(n, 3\).*\(n, 6\)"),
         (np.array([[0, 0, 0, 0, 0.3, 0], [0, 0, 0, 0, 0, 0]]), "rad"),
         (np.array([[0, 0, 0, 0, np.nan, 0], [0, 0, 0, 0, 0, 0]]), "NaN"),
+        (np.array([[0, 0, 0], [1e39, 0, 0]]), r"within \+-3.4e\+38, the range of float32"),  # was a torch error
     ],
 )
 def test_bad_6dof_paths_get_clear_errors(cp, message):

@@ -34,7 +34,8 @@ def validate_control_points(control_points) -> np.ndarray:
     ------
     ValueError
         If the array is not ``(n, 3)`` or ``(n, 6)`` with ``n >= 2``, holds NaN
-        or Inf, or a rotation beyond ``MAX_ROTATION`` radians.
+        or Inf or values beyond float32's range, or a rotation beyond
+        ``MAX_ROTATION`` radians.
     """
     try:
         cp = np.asarray(control_points, dtype=np.float64)
@@ -51,6 +52,9 @@ def validate_control_points(control_points) -> np.ndarray:
         )
     if not np.all(np.isfinite(cp)):
         raise ValueError("control points contain NaN or Inf")
+    if np.abs(cp).max() > np.finfo(np.float32).max:
+        raise ValueError(f"control points must lie within +-{np.finfo(np.float32).max:.3g}, the range of float32 "
+                         f"in which paths are computed; got {np.abs(cp).max():.3g}")
     if cp.shape[1] == 6 and np.abs(cp[:, 3:]).max() > MAX_ROTATION:
         raise ValueError(
             f"rotations must stay within {MAX_ROTATION} rad ({math.degrees(MAX_ROTATION):.1f} degrees), "
