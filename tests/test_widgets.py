@@ -99,6 +99,7 @@ def test_simulate_adds_blurred_and_path_layers(make_napari_viewer, qtbot, lf, no
     path = viewer.layers["sharp blurred path"]
     assert path.shape_type == ["rectangle", "path", "ellipse"]
     assert (path.metadata["n_times"], path.metadata["infinity_disparity"]) == (8, 0.5)
+    assert path.metadata["source_layer"] == "sharp blurred"  # the light field it belongs to, as the reader says
     s = path.metadata["pixels_per_view"]
     assert s == pytest.approx(16 / (2 * 5))
     pos = bezier_positions(cp, 8)
@@ -522,6 +523,7 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
     assert ("final_weight" in meta) == (res.info["restoration"] != "none")
     assert meta["path_windows"] == [[0, 0, *SHAPE[2:4]]]  # a small view: the path is estimated on all of it
     path = viewer.layers["b estimated path"]
+    assert path.metadata["source_layer"] == "b deblurred (blind)"
     # the true path is shown in the estimate's gauge (linear_path is centred; maybe time-reversed)
     true_shown = np.asarray(path.metadata["true_control_points"])
     assert np.allclose(true_shown, cp_true) or np.allclose(true_shown, cp_true[::-1])

@@ -45,7 +45,9 @@ Camera path
     (all 6 columns of a path with rotation), ``'n_times'``,
     ``'infinity_disparity'`` (when known), ``'lightfield_shape'``,
     ``'view_shape'`` (``[Y, X]``, the views the path belongs to),
-    ``'pixels_per_view'``, ``'frame'`` (a sentence saying the above) and,
+    ``'pixels_per_view'``, ``'frame'`` (a sentence saying the above),
+    ``'source_layer'`` (the light-field layer the path belongs to, from the
+    readers and the widgets) and,
     for a path with rotation columns, ``'motion': '6dof'`` and
     ``'max_rotation_rad'`` (the largest ``|r|`` along the path).
 """

@@ -355,7 +355,7 @@ class BlindDeblurWidget(SolverWidget):
         d_inf = job["settings"]["infinity_disparity"]
         path = self.add_result(path_layer_data(
             cp, job["shape"], n_times=n_times, name=path_name, true_control_points=job["true"],
-            infinity_disparity=d_inf))
+            infinity_disparity=d_inf, metadata={"source_layer": out.name}))
         layers = self.viewer.layers
         if layers.index(out) > layers.index(path):
             layers.move(layers.index(out), layers.index(path))  # the path is drawn over the light field
@@ -365,7 +365,8 @@ class BlindDeblurWidget(SolverWidget):
         if "rejected_path" in info:  # kept as a layer, for *4D deconvolution*: no need to estimate it again
             rejected = self.add_result(path_layer_data(
                 info["rejected_path"], job["shape"], n_times=n_times, name=f"{job['source']} rejected path",
-                true_control_points=job["true"], infinity_disparity=d_inf, metadata={"kind": "rejected path"}))
+                true_control_points=job["true"], infinity_disparity=d_inf,
+                metadata={"kind": "rejected path", "source_layer": out.name}))
             self.last_layers.append(rejected)
             note = f"; the path it rejected is in the layer '{rejected.name}', for 4D deconvolution"
         else:  # an earlier run's rejected path is not this result's

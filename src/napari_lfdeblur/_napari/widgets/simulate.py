@@ -139,7 +139,8 @@ class SimulateBlurWidget(SolverWidget):
         )
         out = self.add_result(lightfield_layer_data(blurred, name=name, metadata=meta))
         path = self.add_result(path_layer_data(job["cp"], job["shape"], n_times=p["n_times"],
-                                               infinity_disparity=p["infinity_disparity"], name=f"{name} path"))
+                                               infinity_disparity=p["infinity_disparity"], name=f"{name} path",
+                                               metadata={"source_layer": out.name}))
         self.last_layers = [out, path]
         self.plot.plot(job["cp"], n_times=p["n_times"])
         self.epi.layer_combo.set_layer(out)
