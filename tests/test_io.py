@@ -9,6 +9,7 @@ independent tool too). Each bad-input case of issue 3 has its own test.
 from __future__ import annotations
 
 import json
+import warnings
 import struct
 import zlib
 from pathlib import Path
@@ -131,7 +132,6 @@ def test_transposed_views_warn_on_read_and_upright_ones_do_not(tmp_path, recwarn
 
 def test_reading_views_in_threads_leaves_the_warning_filters_alone(tmp_path):
     """Decoding views in threads once left a process-wide 'ignore all warnings' filter behind."""
-    import warnings
 
     folder = _lytro_views(tmp_path / "cap", _u8(np.random.default_rng(3).random((6, 6, 40, 40, 3))))
     before = list(warnings.filters)
@@ -497,7 +497,6 @@ def test_a_path_file_beside_a_file_is_that_files_own(tmp_path, lf_gray):
 
 
 def test_a_path_file_for_views_of_another_size_is_read_with_a_warning(tmp_path, lf_gray):
-    import warnings
 
     Y, X = lf_gray.shape[2:4]
     for name, cp in (("pz", [[0, 0, 0.3], [1, 0, -0.3]]), ("flat", [[0, 0, 0], [1, 0.5, 0]])):
@@ -975,3 +974,38 @@ def test_a_file_holding_no_light_field_is_named_once_in_a_sentence(tmp_path):
         read_lightfield(tmp_path / "c7.npy")
     assert str(exc.value).startswith(f"{tmp_path / 'c7.npy'}: a colour light field must have 1 to 4 channels")
     assert str(exc.value).count("c7.npy") == 1
+
+
+def test_a_write_that_fails_on_the_paths_fields_leaves_nothing(tmp_path, lf_gray):
+    cp = linear_path(1.0)
+    for name in ("nt.npz", "nt.npy", "nt.tif", "nt.h5", "views"):
+        for bad, said in (({"n_times": 16.0}, "n_times = 16.0"), ({"infinity_disparity": float("nan")}, "nan")):
+            with pytest.raises(ValueError, match=said):
+                write_lightfield(tmp_path / name, lf_gray, metadata=bad, control_points=cp)
+            assert list(tmp_path.iterdir()) == []
+
+
+def test_metadata_passed_along_does_not_override_the_arrays_own_shape(tmp_path, lf_gray):
+    # metadata read from a light field, written with a crop of it: the crop's shape, and its views' size in the path
+    meta = read_lightfield_with_metadata(write_lightfield(tmp_path / "whole.npz", lf_gray,
+                                                          control_points=linear_path(1.0)))[1]
+    part = lf_gray[:, :, 1:, :-2]
+    written = write_lightfield(tmp_path / "part.npz", part, metadata=meta, control_points=linear_path(1.0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back, meta2 = read_lightfield_with_metadata(written)
+    assert not [w for w in caught if "the path is for" in str(w.message)]
+    assert back.shape == part.shape and meta2["saved_metadata"]["shape"] == list(part.shape)
+    assert json.loads(path_json_beside(written).read_text())["view_shape"] == list(part.shape[2:4])
+
+
+def test_a_path_file_of_an_earlier_file_is_not_removed_without_overwrite(tmp_path, lf_gray):
+    write_lightfield(tmp_path / "a.npz", lf_gray, control_points=linear_path(1.0))
+    (tmp_path / "a.npz").unlink()
+    before = (tmp_path / "a.path.json").read_text()
+    with pytest.raises(FileExistsError, match="a.path.json exists and holds the camera path of an earlier a.npz"):
+        write_lightfield(tmp_path / "a.npz", lf_gray)
+    assert not (tmp_path / "a.npz").exists() and (tmp_path / "a.path.json").read_text() == before
+    write_lightfield(tmp_path / "a.npz", lf_gray, overwrite=True)  # replaced: the old path goes with it
+    assert not (tmp_path / "a.path.json").exists()
+    assert "control_points" not in read_lightfield_with_metadata(tmp_path / "a.npz")[1]

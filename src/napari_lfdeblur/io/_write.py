@@ -329,8 +329,9 @@ def write_lightfield(
         that file is there. Such a path JSON is left as it is (with a
         warning) when the new file keeps its path itself (``.npz``,
         ``.tif``, ``.h5``) and ``overwrite`` is False; otherwise it is a
-        FileExistsError. Replacing a file without a path removes the path
-        JSON that named it.
+        FileExistsError. Writing a file without a path where a path JSON
+        names it (that of an earlier file of this name) removes that JSON
+        with ``overwrite=True`` and is a FileExistsError without.
     compress : bool
         Compress ``.npz``, TIFF and HDF5 data (lossless).
 
@@ -342,13 +343,16 @@ def write_lightfield(
     Raises
     ------
     FileExistsError
-        If the destination exists and ``overwrite`` is False.
+        If the destination (or the path JSON beside it, see
+        ``control_points``) exists and ``overwrite`` is False.
     LightFieldFormatError
         If ``lf`` is not a light field or contains NaN/Inf, the format
         cannot be told from the suffix, or it has 2 channels and the format
         is an image (views, mosaic, ESLF: images hold 1, 3 or 4 channels).
     ValueError
-        On an unknown ``layout`` or ``bit_depth``, or ``bit_depth=32`` for PNG.
+        On an unknown ``layout`` or ``bit_depth``, ``bit_depth=32`` for PNG,
+        or, with ``control_points``, ``n_times`` or ``infinity_disparity`` in
+        ``metadata`` that a path file cannot state; nothing is written then.
     """
     path = Path(path)
     layout = _layout_of(path, layout)
@@ -365,9 +369,14 @@ def write_lightfield(
         from ..path import validate_control_points
 
         cp = validate_control_points(control_points)
-    meta = jsonable({"axes": "vuyxc"[: arr.ndim], "shape": list(arr.shape), **(metadata or {})})
+    # the array's own axes and shape win over those of metadata passed along from another light field
+    meta = jsonable({**(metadata or {}), "axes": "vuyxc"[: arr.ndim], "shape": list(arr.shape)})
     if cp is not None:
         meta["control_points"] = cp.tolist()
+        fields = _path_fields(meta)  # checked before anything is written: a failure leaves nothing behind
+        for key in ("n_times", "infinity_disparity"):
+            if fields.get(key) is not None:
+                check_path_field(key, fields[key], "the path")
     sidecar = sidecar_path_json(path, layout) if cp is not None else None
     owner = None
     if sidecar is not None and layout in _EMBEDS_PATH and not overwrite:
@@ -375,6 +384,9 @@ def write_lightfield(
         sidecar = None if owner is not None else sidecar
     if sidecar is not None and layout != "views":
         check_writable(sidecar, overwrite)
+    if cp is None and layout != "views" and not overwrite and _names_path(path):
+        raise FileExistsError(f"{path_json_beside(path)} exists and holds the camera path of an earlier {path.name}; "
+                              "pass overwrite=True to replace it, or move it away")
 
     depth = _sample_depth(layout, path, bit_depth)
     data = arr if depth == 32 else _quantize(arr, depth)
@@ -394,18 +406,15 @@ def write_lightfield(
     elif owner is not None:
         warnings.warn(f"{path_json_beside(path).name} belongs to {owner.name} and was left as it is; the camera "
                       f"path of {path.name} is stored in the file itself", stacklevel=2)
-    else:
-        _remove_stale_path(path)
+    elif overwrite and _names_path(path):  # what was replaced had a path: it is not this file's
+        path_json_beside(path).unlink()
     return path
 
 
-def _remove_stale_path(path: Path) -> None:
-    """Remove ``<name>.path.json`` beside the file ``path`` when it names ``path`` (what was replaced had it)."""
-    beside = path_json_beside(path)
-    if path.is_file() and beside.is_file():
-        try:
-            doc = json.loads(beside.read_text())
-        except (OSError, ValueError):
-            return
-        if isinstance(doc, dict) and doc.get("lightfield") == path.name:
-            beside.unlink()
+def _names_path(path: Path) -> bool:
+    """Whether ``<name>.path.json`` beside the file ``path`` is there and names ``path`` as its light field."""
+    try:
+        doc = json.loads(path_json_beside(path).read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and doc.get("lightfield") == path.name
