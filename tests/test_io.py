@@ -1009,3 +1009,14 @@ def test_a_path_file_of_an_earlier_file_is_not_removed_without_overwrite(tmp_pat
     write_lightfield(tmp_path / "a.npz", lf_gray, overwrite=True)  # replaced: the old path goes with it
     assert not (tmp_path / "a.path.json").exists()
     assert "control_points" not in read_lightfield_with_metadata(tmp_path / "a.npz")[1]
+
+
+@pytest.mark.parametrize("suffix", [".h5", ".mat"])
+def test_a_corrupt_hdf5_file_is_one_read_error_that_names_it(tmp_path, lf_gray, suffix):
+    good = write_lightfield(tmp_path / "good.h5", lf_gray)
+    raw = bytearray(good.read_bytes())
+    raw[16:20] = b"\xff\xff\xff\xff"  # the superblock's addresses: h5py fails on opening a group (RuntimeError)
+    bad = tmp_path / f"bad{suffix}"  # .mat: a MATLAB v7.3 file is HDF5 (with the variable "LF")
+    bad.write_bytes(bytes(raw))
+    with pytest.raises(LightFieldReadError, match=rf"{bad.name}: not a readable (HDF5|MATLAB) light field \("):
+        read_lightfield(bad)

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import (LightFieldFormatError, LightFieldReadError, central_views, check_memory, to_float01,
-                      validate_lightfield)
+from ._common import (LightFieldFormatError, LightFieldReadError, central_views, check_memory, names_the_file,
+                      to_float01, validate_lightfield)
 
 _AXIS_ALIASES = {"v": "v", "u": "u", "y": "y", "x": "x", "c": "c", "s": "c", "channel": "c", "channels": "c",
                  "rgb": "c", "color": "c", "colour": "c"}
@@ -325,6 +325,7 @@ def h5_lightfield_name(f) -> str | None:
     return found[0] if len(found) == 1 else None
 
 
+@names_the_file("not a readable HDF5 light field")
 def read_h5(path, *, dataset=None, axes=None, grid=None, value_range=None, max_bytes=None, angular_crop=None):
     import h5py
 

@@ -6,6 +6,7 @@ Nothing here imports napari or Qt.
 
 from __future__ import annotations
 
+import functools
 import operator
 import os
 import shutil
@@ -23,6 +24,7 @@ __all__ = [
     "LightFieldError",
     "LightFieldFormatError",
     "LightFieldReadError",
+    "names_the_file",
     "InsufficientMemoryError",
     "MEMORY_LIMIT_ENV",
     "available_memory",
@@ -52,6 +54,23 @@ class LightFieldFormatError(LightFieldError):
 
 class LightFieldReadError(LightFieldError, OSError):
     """A file could not be decoded: truncated, corrupt, or not an image at all."""
+
+
+def names_the_file(what: str):
+    """Decorator of a reader ``f(path, ...)``: an error of the decoding library inside it (anything but a
+    :class:`LightFieldError`, a ``MemoryError`` or an interrupt) becomes one :class:`LightFieldReadError`
+    that names the file, ``"<path>: <what> (<error>)"``; a corrupt HDF5 file fails in many places."""
+    def wrap(reader):
+        @functools.wraps(reader)
+        def read(path, *args, **kwargs):
+            try:
+                return reader(path, *args, **kwargs)
+            except (LightFieldError, MemoryError):
+                raise
+            except Exception as exc:  # noqa: BLE001 - whatever the library raised
+                raise LightFieldReadError(f"{path}: {what} ({type(exc).__name__}: {exc})") from None
+        return read
+    return wrap
 
 
 class InsufficientMemoryError(LightFieldError, MemoryError):

@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from ._arrays import kept_views
-from ._common import LightFieldFormatError, LightFieldReadError, check_memory, to_float01, validate_lightfield
+from ._common import (LightFieldFormatError, LightFieldReadError, check_memory, names_the_file, to_float01,
+                      validate_lightfield)
 
 
 def _small_metadata(obj, depth=0):
@@ -50,6 +51,7 @@ def is_hdf5(path: Path) -> bool:
     return b"\x89HDF\r\n\x1a\n" in head
 
 
+@names_the_file("not a readable MATLAB light field")
 def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_bytes=None, angular_crop=None):
     """Read a Light Field Toolbox ``.mat`` file (MATLAB v5 or v7.3).
 
