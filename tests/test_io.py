@@ -783,6 +783,11 @@ def test_mat_float_overshoot_is_clipped(tmp_path, lf_gray):
     arr = lf_gray * 1.1 - 0.05
     scipy.io.savemat(tmp_path / "f.mat", {"LF": arr})
     np.testing.assert_allclose(read_lightfield(tmp_path / "f.mat"), np.clip(arr, 0, 1), atol=1e-7)
+    # data on another scale is not an overshoot: refused, as other formats do, until value_range says its scale
+    scipy.io.savemat(tmp_path / "g.mat", {"LF": lf_gray * 255})
+    with pytest.raises(LightFieldFormatError, match="outside \\[0, 1\\]"):
+        read_lightfield(tmp_path / "g.mat")
+    np.testing.assert_allclose(read_lightfield(tmp_path / "g.mat", value_range=(0, 255)), lf_gray, atol=1e-6)
 
 
 def test_png16_decoder_mixed_row_filters_matches_reference(tmp_path):

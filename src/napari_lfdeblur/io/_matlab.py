@@ -51,6 +51,10 @@ def is_hdf5(path: Path) -> bool:
     return b"\x89HDF\r\n\x1a\n" in head
 
 
+#: float data within [-OVERSHOOT, 1 + OVERSHOOT] is taken as [0, 1] overshot by colour correction, and clipped
+OVERSHOOT = 0.5
+
+
 @names_the_file("not a readable MATLAB light field")
 def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_bytes=None, angular_crop=None):
     """Read a Light Field Toolbox ``.mat`` file (MATLAB v5 or v7.3).
@@ -131,10 +135,11 @@ def read_mat(path, *, variable="LF", drop_weight=True, value_range=None, max_byt
         meta["dropped_weight_channel"] = True
     meta["file_dtype"] = str(raw.dtype)
     raw = validate_lightfield(raw, path)
-    if value_range is None and np.issubdtype(raw.dtype, np.floating):
-        # the toolbox's float light fields are nominally in [0, 1]; colour
-        # correction can overshoot a little, so clip instead of refusing
-        value_range = (0.0, 1.0)
+    if value_range is None and np.issubdtype(raw.dtype, np.floating) and raw.size and np.isfinite(raw).all():
+        # the toolbox's float light fields are nominally in [0, 1]; colour correction can overshoot a little,
+        # so clip that instead of refusing; data on another scale (0..255, say) is refused, with the hint
+        if -OVERSHOOT <= float(raw.min()) and float(raw.max()) <= 1 + OVERSHOOT:
+            value_range = (0.0, 1.0)
     return to_float01(np.ascontiguousarray(raw), path, value_range=value_range), meta
 
 
