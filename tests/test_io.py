@@ -1025,3 +1025,15 @@ def test_a_corrupt_hdf5_file_is_one_read_error_that_names_it(tmp_path, lf_gray, 
     bad.write_bytes(bytes(raw))
     with pytest.raises(LightFieldReadError, match=rf"{bad.name}: not a readable (HDF5|MATLAB) light field \("):
         read_lightfield(bad)
+
+
+def test_writing_values_outside_0_1_warns_how_to_read_them_back(tmp_path, lf_gray):
+    lf = lf_gray * 2.0 - 0.5  # [-0.5, 1.5]
+    lo, hi = float(lf.min()), float(lf.max())
+    with pytest.warns(UserWarning, match=r"o.npz: the values span .*outside \[0, 1\]; they are stored as they are"):
+        written = write_lightfield(tmp_path / "o.npz", lf)
+    with pytest.raises(LightFieldFormatError, match="outside"):
+        read_lightfield(written)
+    np.testing.assert_allclose(read_lightfield(written, value_range=(lo, hi)), (lf - lo) / (hi - lo), atol=1e-6)
+    with pytest.warns(UserWarning, match="the 8-bit samples clip them to"):
+        write_lightfield(tmp_path / "o.png", lf, layout="mosaic")

@@ -304,8 +304,10 @@ def write_lightfield(
         folder) writes a folder of ``view_RR_CC.png`` views, 1-based, which
         :func:`read_lightfield` reads back.
     lf : array_like, (V, U, Y, X) or (V, U, Y, X, C)
-        The light field. Float data should be in [0, 1] (integer formats clip
-        to it); integer data is scaled by its dtype's maximum.
+        The light field. Float data should be in [0, 1]: beyond it, a warning
+        says that integer formats clip it and that a float file needs
+        ``value_range`` to be read back. Integer data is scaled by its
+        dtype's maximum.
     overwrite : bool
         Replace an existing file. Default False: raise FileExistsError. A
         folder is only replaced if it holds nothing but views written by us.
@@ -389,6 +391,12 @@ def write_lightfield(
                               "pass overwrite=True to replace it, or move it away")
 
     depth = _sample_depth(layout, path, bit_depth)
+    lo, hi = (float(arr.min()), float(arr.max())) if arr.size else (0.0, 1.0)
+    if lo < -1e-3 or hi > 1 + 1e-3:  # the readers clip overshoots of up to 1e-3 (rounding)
+        warnings.warn(f"{path.name}: the values span [{lo:.4g}, {hi:.4g}], outside [0, 1]; " + (
+            f"they are stored as they are, and reading the file back needs value_range=({lo:.4g}, {hi:.4g}) or "
+            "'auto' (which maps that span to [0, 1])" if depth == 32 else
+            f"the {depth}-bit samples clip them to [0, 1]"), stacklevel=2)
     data = arr if depth == 32 else _quantize(arr, depth)
     meta["bit_depth"] = depth
 
