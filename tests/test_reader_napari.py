@@ -42,6 +42,20 @@ def test_get_reader_claims_only_light_fields(tmp_path, lf_rgb):
     assert napari_get_reader(12) is None
 
 
+def test_get_reader_leaves_npy_files_whose_header_says_they_cannot_be_read(tmp_path, lf_rgb):
+    from napari_lfdeblur._napari.reader import napari_get_reader
+
+    np.save(tmp_path / "ok.npy", lf_rgb)
+    assert callable(napari_get_reader(str(tmp_path / "ok.npy")))
+    np.save(tmp_path / "complex.npy", lf_rgb.astype(np.complex64))
+    np.save(tmp_path / "objects.npy", np.empty((2, 2, 3, 3), dtype=object), allow_pickle=True)
+    np.save(tmp_path / "empty.npy", np.zeros((0, 2, 3, 3), np.float32))
+    whole = (tmp_path / "ok.npy").read_bytes()
+    (tmp_path / "truncated.npy").write_bytes(whole[: len(whole) - 1])
+    for name in ("complex.npy", "objects.npy", "empty.npy", "truncated.npy"):
+        assert napari_get_reader(str(tmp_path / name)) is None, name
+
+
 @pytest.mark.parametrize("name", ["x.npy", "x.npz", "x.tif", "x.h5", "x.mat", "x.eslf.png", "x.ESLF.png", "x.json"])
 def test_get_reader_never_raises_on_garbage(tmp_path, name):
     """The npe2 reader contract: the hook never raises; None for a file it cannot read."""

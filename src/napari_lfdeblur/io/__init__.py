@@ -162,9 +162,9 @@ def probe_layout(path) -> str | None:
         layout = detect_layout(path)
         p = _as_path(path)
         if layout == "npy":
-            from ._arrays import npy_header
+            from ._arrays import npy_may_be_lightfield
 
-            return layout if len(npy_header(p)[0]) in (4, 5) else None
+            return layout if npy_may_be_lightfield(p) else None
         if layout == "npz":
             from ._arrays import npz_headers, npz_lightfield_key
 

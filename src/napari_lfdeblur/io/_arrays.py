@@ -119,13 +119,26 @@ def _shape_error(shape, path, what="the array", grid=None):
 
 def npy_header(path) -> tuple[tuple[int, ...], np.dtype]:
     """Shape and dtype from a .npy header, without reading the data."""
+    return _npy_header(path)[:2]
+
+
+def _npy_header(path):
+    """Shape, dtype and the offset of the data in a .npy file."""
     with open(path, "rb") as fh:
         version = np.lib.format.read_magic(fh)
         if version == (1, 0):
             shape, _fortran, dtype = np.lib.format.read_array_header_1_0(fh)
         else:
             shape, _fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-    return tuple(shape), np.dtype(dtype)
+        return tuple(shape), np.dtype(dtype), fh.tell()
+
+
+def npy_may_be_lightfield(path) -> bool:
+    """Whether a .npy file's header describes a light field the reader can take: 4D or 5D, not empty, of
+    numbers (not complex or objects), with all its data in the file (not truncated)."""
+    shape, dtype, offset = _npy_header(path)
+    return (len(shape) in (4, 5) and min(shape) > 0 and dtype.kind in "biuf"
+            and Path(path).stat().st_size >= offset + int(np.prod(shape)) * dtype.itemsize)
 
 
 def read_npy(path, *, axes=None, grid=None, value_range=None, max_bytes=None, angular_crop=None):
