@@ -377,8 +377,10 @@ def test_writer_round_trip(tmp_path, lf_rgb, lf_gray, name, kwargs, read_kwargs,
 
 def test_writer_eslf_round_trip(tmp_path, lf_rgb):
     lf = lf_rgb[:3, :3]
-    p = write_lightfield(tmp_path / "x.eslf.png", lf, layout="eslf", bit_depth=16)
-    np.testing.assert_allclose(read_lightfield(p, angular_size=3), lf, atol=0.5 / 65535 + 1e-7)
+    for name in ("x.eslf.png", "x.eslf.tif"):  # both found to be ESLF by their name
+        p = write_lightfield(tmp_path / name, lf, layout="eslf", bit_depth=16)
+        assert detect_layout(p) == probe_layout(p) == "eslf"
+        np.testing.assert_allclose(read_lightfield(p, angular_size=3), lf, atol=0.5 / 65535 + 1e-7)
 
 
 def test_writer_outputs_readable_by_other_tools(tmp_path, lf_rgb):

@@ -129,9 +129,9 @@ def detect_layout(path) -> str:
         return {"rc": "views", "hci": "hci", "stanford": "stanford"}[scheme]
     name = path.name.lower()
     suffix = path.suffix.lower()
-    if suffix in _SUFFIX_LAYOUT:
+    if suffix in _SUFFIX_LAYOUT and not (suffix in (".tif", ".tiff") and "eslf" in name):
         return _SUFFIX_LAYOUT[suffix]
-    if suffix in _IMAGE_SUFFIXES:
+    if suffix in _IMAGE_SUFFIXES or suffix in (".tif", ".tiff"):
         if "eslf" in name:
             return "eslf"
         raise LightFieldFormatError(
@@ -197,9 +197,10 @@ def probe_layout(path) -> str | None:
             import scipy.io
 
             return layout if any(n == "LF" and len(s) in (4, 5) for n, s, _c in scipy.io.whosmat(p)) else None
-        if layout == "eslf":
+        if layout == "eslf":  # an image file (PNG, TIFF, JPEG, BMP) by its first bytes
             with open(p, "rb") as fh:
-                return layout if fh.read(8) == b"\x89PNG\r\n\x1a\n" else None
+                head = fh.read(8)
+            return layout if head.startswith((b"\x89PNG\r\n\x1a\n", b"II*\x00", b"MM\x00*", b"\xff\xd8\xff", b"BM")) else None
         return layout
     except Exception:  # noqa: BLE001 - a probe never raises
         return None
