@@ -23,6 +23,7 @@ from napari_lfdeblur import (
     view_shifts,
     views_transposed,
 )
+from napari_lfdeblur.epi import ViewOrderWarning, warn_if_transposed
 from napari_lfdeblur.path import PRESETS, preset_path
 
 from conftest import LYTRO_DIR
@@ -108,6 +109,19 @@ def test_view_shifts_measure_the_disparity_along_the_right_axes():
     diag = moving_texture(n_views=5, d=1.0)
     diag = diag + diag.swapaxes(0, 1)
     assert views_transposed(diag) is None
+
+
+def test_views_that_are_no_shifted_copies_are_not_called_transposed(recwarn):
+    # noise (or unrelated images): registration finds some shift, but the views do not match after it
+    rng = np.random.default_rng(0)
+    for shape in ((5, 5, 32, 40), (5, 5, 64, 64), (3, 9, 48, 32)):
+        noise = rng.random(shape).astype(np.float32)
+        assert views_transposed(noise) is None
+        assert warn_if_transposed(noise, "noise") is not None
+    assert not [w for w in recwarn if issubclass(w.category, ViewOrderWarning)]
+    # the same views made shifted copies of each other are measured as before, in either layout
+    lf = moving_texture(n_views=5, d=1.5)
+    assert views_transposed(lf) is False and views_transposed(lf.swapaxes(0, 1)) is True
 
 
 def test_view_shifts_bad_input():

@@ -19,6 +19,7 @@ __all__ = [
     "vertical_epi",
     "view_shifts",
     "views_transposed",
+    "MIN_VIEW_CORRELATION",
     "shifts_measurable",
     "transposed_from_shifts",
     "warn_if_transposed",
@@ -78,18 +79,25 @@ def _gray_view(arr: np.ndarray, v: int, u: int) -> np.ndarray:
     return view.mean(axis=-1) if view.ndim == 3 else view
 
 
-def _register(ref: np.ndarray, moving: np.ndarray, n_refine: int = 4) -> np.ndarray:
-    """The ``(dy, dx)`` shift that, applied to ``moving``, best matches ``ref``.
+#: registered views that correlate less than this with the centre view are not shifted copies of it
+MIN_VIEW_CORRELATION = 0.3
+
+
+def _register(ref: np.ndarray, moving: np.ndarray, n_refine: int = 4) -> tuple[np.ndarray, float]:
+    """The ``(dy, dx)`` shift that, applied to ``moving``, best matches ``ref``, and how well it does.
 
     Phase correlation finds it to within a fraction of a pixel (its
     upsampled peak is biased towards whole pixels on smooth images); a few
     Gauss-Newton steps on the squared difference (Lucas-Kanade) refine it.
+    The second value is the correlation coefficient of ``ref`` and the
+    shifted ``moving`` away from the edges: nan for flat views, 0 for a
+    shift that leaves no overlap.
     """
     from scipy import ndimage
     from skimage.registration import phase_cross_correlation
 
     if np.ptp(ref) == 0 or np.ptp(moving) == 0:  # a flat view has nothing to register (and skimage warns)
-        return np.zeros(2)
+        return np.zeros(2), float("nan")
     shift = np.asarray(phase_cross_correlation(ref, moving, upsample_factor=10, normalization=None)[0], float)
     for _ in range(n_refine):
         m = ndimage.shift(moving, shift, order=3, mode="nearest")
@@ -103,7 +111,14 @@ def _register(ref: np.ndarray, moving: np.ndarray, n_refine: int = 4) -> np.ndar
         shift += step
         if np.abs(step).max() < 1e-3:
             break
-    return shift
+    b = int(np.ceil(np.abs(shift).max())) + 2
+    if min(ref.shape) <= 2 * b + 2:
+        return shift, 0.0  # shifted out of the view: no match
+    crop = (slice(b, -b), slice(b, -b))
+    a, m = ref[crop].ravel(), ndimage.shift(moving, shift, order=3, mode="nearest")[crop].ravel()
+    a, m = a - a.mean(), m - m.mean()
+    norm = float(np.sqrt((a * a).sum() * (m * m).sum()))
+    return shift, float((a * m).sum()) / norm if norm > 0 else float("nan")
 
 
 def view_shifts(lf, *, validate: bool = True) -> np.ndarray:
@@ -150,10 +165,15 @@ def view_shifts(lf, *, validate: bool = True) -> np.ndarray:
     arr = validate_lightfield(lf) if validate else np.asarray(lf)
     if not shifts_measurable(arr.shape):
         raise ValueError(f"view_shifts needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
+    return _view_motion(arr)[0]
+
+
+def _view_motion(arr: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`view_shifts` of a checked light field, and the least correlation of a registered view pair."""
     V, U = arr.shape[:2]
     cv, cu = (V - 1) // 2, (U - 1) // 2
     ref = _gray_view(arr, cv, cu)
-    out = np.zeros((2, 2))
+    out, least = np.zeros((2, 2)), 1.0
     for axis, (n, c) in enumerate(((V, cv), (U, cu))):
         per_step = []
         for end in (0, n - 1):
@@ -161,9 +181,11 @@ def view_shifts(lf, *, validate: bool = True) -> np.ndarray:
                 continue
             v, u = (end, cu) if axis == 0 else (cv, end)
             # the shift that registers the end view onto the centre one is -(end - c) * d
-            per_step.append(-_register(ref, _gray_view(arr, v, u)) / (end - c))
+            shift, agreement = _register(ref, _gray_view(arr, v, u))
+            per_step.append(-shift / (end - c))
+            least = min(least, agreement) if not np.isnan(agreement) else least
         out[axis] = np.mean(per_step, axis=0)
-    return out
+    return out, least
 
 
 def shifts_measurable(shape) -> bool:
@@ -194,9 +216,15 @@ def views_transposed(lf, min_shift: float = 0.1) -> bool | None:
         True when the motion is mostly across (``u`` moves ``y``, ``v``
         moves ``x``), False when it is mostly along the documented axes, None
         when the scene barely moves between views (a light field focused on
-        its content) or the motion is not clearly either.
+        its content), the motion is not clearly either, or the views are not
+        shifted copies of each other (registered, a pair correlates by less
+        than :data:`MIN_VIEW_CORRELATION`: noise, unrelated images).
     """
-    return transposed_from_shifts(view_shifts(lf), min_shift)
+    arr = validate_lightfield(lf)
+    if not shifts_measurable(arr.shape):
+        raise ValueError(f"views_transposed needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
+    shifts, agreement = _view_motion(arr)
+    return transposed_from_shifts(shifts, min_shift) if agreement >= MIN_VIEW_CORRELATION else None
 
 
 def transposed_from_shifts(shifts: np.ndarray, min_shift: float = 0.1) -> bool | None:
@@ -238,12 +266,14 @@ def warn_if_transposed(lf, source: str, *, fix: str = "", stacklevel: int = 2) -
     -------
     ndarray of shape (2, 2), or None
         :func:`view_shifts`' measurement; None where it cannot be made
-        (:func:`shifts_measurable`), and then nothing is warned.
+        (:func:`shifts_measurable`), and then nothing is warned. Nor is it
+        when the views are not shifted copies of each other
+        (:func:`views_transposed`).
     """
     if not shifts_measurable(lf.shape):
         return None
-    shifts = view_shifts(lf, validate=False)
-    if transposed_from_shifts(shifts):
+    shifts, agreement = _view_motion(np.asarray(lf))
+    if agreement >= MIN_VIEW_CORRELATION and transposed_from_shifts(shifts):
         warning = ViewOrderWarning(
             f"{source}: the views look transposed: stepping through u moves the image along y by "
             f"{shifts[1, 0]:+.2f} px/view and stepping through v moves it along x by {shifts[0, 1]:+.2f} px/view, "
