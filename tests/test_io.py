@@ -1039,3 +1039,13 @@ def test_writing_values_outside_0_1_warns_how_to_read_them_back(tmp_path, lf_gra
     np.testing.assert_allclose(read_lightfield(written, value_range=(lo, hi)), (lf - lo) / (hi - lo), atol=1e-6)
     with pytest.warns(UserWarning, match="the 8-bit samples clip them to"):
         write_lightfield(tmp_path / "o.png", lf, layout="mosaic")
+
+
+def test_float64_beyond_float32_and_timedelta_data(tmp_path):
+    np.save(tmp_path / "big.npy", np.full((2, 2, 8, 8), 1e300))  # finite in float64, inf in float32
+    with pytest.raises(LightFieldFormatError, match=r"float values span \[1e\+300, 1e\+300\], outside"):
+        read_lightfield(tmp_path / "big.npy")  # was "contains 256 NaN or Inf value(s)"
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "big.npy", value_range=(0, 2e300)), 0.5)
+    np.save(tmp_path / "td.npy", np.zeros((2, 2, 8, 8), "m8[s]"))
+    with pytest.raises(LightFieldFormatError, match="unsupported data type timedelta64"):
+        read_lightfield(tmp_path / "td.npy")

@@ -238,7 +238,7 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
     arr = np.asarray(arr)
     if arr.dtype == bool:
         return arr.astype(np.float32)
-    if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+    if arr.dtype.kind not in "iuf":  # (numpy counts timedelta64 as an integer)
         raise LightFieldFormatError(f"{path}: unsupported data type {arr.dtype}; expected integers or floats")
     if value_range is None and np.issubdtype(arr.dtype, np.integer):
         info = np.iinfo(arr.dtype)
@@ -249,24 +249,27 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
         out = arr.astype(np.float32)
         out /= np.float32(info.max)  # divide (not multiply by 1/max): exact for every integer value
         return out
-    out = arr.astype(np.float32, copy=arr.dtype != np.float32)
-    if out.size and not np.isfinite(out).all():
-        bad = int(np.count_nonzero(~np.isfinite(out)))
+    if arr.size and not np.isfinite(arr).all():
+        bad = int(np.count_nonzero(~np.isfinite(arr)))
         raise LightFieldFormatError(f"{path}: the data contains {bad} NaN or Inf value(s)")
-    if out.size == 0:
-        raise LightFieldFormatError(f"{path}: the light field is empty (shape {out.shape})")
+    if arr.size == 0:
+        raise LightFieldFormatError(f"{path}: the light field is empty (shape {arr.shape})")
     if value_range is not None:
-        lo, hi = (float(out.min()), float(out.max())) if value_range == "auto" else value_range
+        lo, hi = (float(arr.min()), float(arr.max())) if value_range == "auto" else value_range
         if not hi > lo:  # 'auto' on constant data
             hi = lo + 1.0
-        out = (out - np.float32(lo)) * np.float32(1.0 / (hi - lo))
+        if arr.dtype.itemsize > 4:  # float64 and wider: scaled first (values may lie beyond float32's range)
+            out = ((arr - lo) * (1.0 / (hi - lo))).astype(np.float32)
+        else:
+            out = (arr.astype(np.float32, copy=False) - np.float32(lo)) * np.float32(1.0 / (hi - lo))
         np.clip(out, 0.0, 1.0, out=out)
         return out
-    lo, hi = float(out.min()), float(out.max())
+    lo, hi = float(arr.min()), float(arr.max())
     if lo < -1e-3 or hi > 1.0 + 1e-3:
         raise LightFieldFormatError(
             f"{path}: float values span [{lo:.4g}, {hi:.4g}], outside [0, 1]; to rescale, pass {RESCALE_HINT}"
         )
+    out = arr.astype(np.float32, copy=arr.dtype != np.float32)
     if lo < 0 or hi > 1:
         np.clip(out, 0.0, 1.0, out=out)
     return out
