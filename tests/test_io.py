@@ -1049,3 +1049,11 @@ def test_float64_beyond_float32_and_timedelta_data(tmp_path):
     np.save(tmp_path / "td.npy", np.zeros((2, 2, 8, 8), "m8[s]"))
     with pytest.raises(LightFieldFormatError, match="unsupported data type timedelta64"):
         read_lightfield(tmp_path / "td.npy")
+
+
+def test_a_truncated_tiff_is_a_read_error(tmp_path, lf_gray, capsys):
+    whole = write_lightfield(tmp_path / "whole.tif", lf_gray, compress=False).read_bytes()
+    (tmp_path / "half.tif").write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(LightFieldReadError, match=r"half.tif: a truncated or corrupt TIFF file \(tifffile: "):
+        read_lightfield(tmp_path / "half.tif")  # was a 2D-series LightFieldFormatError after two log lines
+    assert capsys.readouterr().err == ""

@@ -254,16 +254,39 @@ def _load_json_meta(value) -> dict:
 # ------------------------------------------------------------------ TIFF
 
 
+#: what tifffile logs when pages or data are missing (it reads on, with fewer pages)
+_TIFF_BROKEN = ("invalid page offset", "failed to reshape", "truncat")
+
+
 def tiff_shape(path) -> tuple[tuple[int, ...], np.dtype, dict]:
+    """Shape, dtype and metadata of a TIFF's first series, from its tags; raises on a truncated or corrupt file.
+
+    tifffile only logs what it finds broken (a page offset past the end, a series that does not fit its
+    stated shape) and reads on; those records become a :class:`LightFieldReadError` here.
+    """
+    import logging
+
     import tifffile
 
-    with tifffile.TiffFile(path) as tif:
-        s = tif.series[0]
-        meta = {}
-        if tif.shaped_metadata:
-            meta = dict(tif.shaped_metadata[0])
-        meta["_series_axes"] = s.axes
-        return tuple(s.shape), np.dtype(s.dtype), meta
+    broken: list[str] = []
+    handler = logging.Handler(logging.WARNING)  # only what says the file lacks data; tifffile logs other news too
+    handler.emit = lambda record: broken.extend(
+        [record.getMessage()] if any(k in record.getMessage() for k in _TIFF_BROKEN) else [])
+    log = logging.getLogger("tifffile")
+    log.addHandler(handler)
+    try:
+        with tifffile.TiffFile(path) as tif:
+            s = tif.series[0]
+            meta = {}
+            if tif.shaped_metadata:
+                meta = dict(tif.shaped_metadata[0])
+            meta["_series_axes"] = s.axes
+            shape, dtype = tuple(s.shape), np.dtype(s.dtype)
+    finally:
+        log.removeHandler(handler)
+    if broken:
+        raise LightFieldReadError(f"{path}: a truncated or corrupt TIFF file (tifffile: {broken[0]})")
+    return shape, dtype, meta
 
 
 def read_tiff(path, *, axes=None, grid=None, value_range=None, max_bytes=None, angular_crop=None):
@@ -272,6 +295,8 @@ def read_tiff(path, *, axes=None, grid=None, value_range=None, max_bytes=None, a
     path = Path(path)
     try:
         shape, dtype, tmeta = tiff_shape(path)
+    except LightFieldReadError:
+        raise
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: not a readable TIFF file ({type(exc).__name__}: {exc})") from None
     meta: dict = {"layout": "tiff"}
