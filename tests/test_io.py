@@ -603,6 +603,9 @@ def test_bad_missing_hci_view(tmp_path, lf_gray):
             iio.imwrite(folder / f"input_Cam{k:03d}.png", _u8(lf_gray[0, 0]))
     with pytest.raises(LightFieldFormatError, match="input_Cam004"):
         read_lightfield(folder)
+    (folder / "input_Cam008.png").rename(folder / "input_Cam004.png")  # the last one missing: 8 of 9
+    with pytest.raises(LightFieldFormatError, match="as a 3x3 grid it lacks input_Cam008; pass grid="):
+        read_lightfield(folder)
 
 
 def test_hci_scheme_on_a_folder_without_hci_names(tmp_path, lf_gray):

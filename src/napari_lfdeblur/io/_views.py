@@ -131,10 +131,11 @@ def _hci_views(folder: Path, names, grid):
     """
     idx = {}
     dup: list[str] = []
+    width = 3  # digits of the names' numbers
     for n in names:
         m = _HCI.match(n)
         if m:
-            k = int(m.group(1))
+            k, width = int(m.group(1)), len(m.group(1))
             if k in idx:
                 dup.append(f"{idx[k]} and {n}")
             idx[k] = n
@@ -146,9 +147,12 @@ def _hci_views(folder: Path, names, grid):
     else:
         side = math.isqrt(total)
         if side * side != total:
+            up = side + 1  # the last views of a square grid may be what is missing
+            missing = [f"input_Cam{k:0{width}d}" for k in range(up * up) if k not in idx]
             raise LightFieldFormatError(
                 f"{folder}: {len(idx)} HCI views input_CamNNN with indices up to {total - 1} do not form a "
-                f"square grid; pass grid=(V, U) if the grid is not square"
+                f"square grid; as a {up}x{up} grid it lacks {', '.join(missing[:5])}"
+                f"{' and more' if len(missing) > 5 else ''}; pass grid=(V, U) if the grid is not square"
             )
         V = U = side
     views: dict[tuple[int, int], str] = {}
