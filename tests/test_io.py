@@ -545,6 +545,13 @@ def test_writer_never_overwrites_unless_asked(tmp_path, lf_gray):
     with pytest.raises(FileExistsError, match="not light-field views"):
         write_lightfield(tmp_path / "mine", lf_gray, overwrite=True)
     assert (tmp_path / "mine" / "thesis.docx").read_text() == "precious"
+    capture = tmp_path / "capture"  # a user's own views, named as ours are but not written by us
+    write_lightfield(capture, lf_gray)
+    (capture / "lightfield.json").unlink()
+    before = {f.name: f.read_bytes() for f in capture.iterdir()}
+    with pytest.raises(FileExistsError, match="holds views that write_lightfield did not write"):
+        write_lightfield(capture, lf_gray * 0.5, overwrite=True)
+    assert {f.name: f.read_bytes() for f in capture.iterdir()} == before
 
 
 def test_writer_failure_leaves_nothing(tmp_path, lf_gray, monkeypatch):

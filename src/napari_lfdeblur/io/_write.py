@@ -267,6 +267,10 @@ def _write_views(path, data, meta, cp, *, overwrite):
     """A folder of ``view_RR_CC.png`` (1-based), ``lightfield.json`` and, with a path, ``path.json``."""
     V, U = data.shape[:2]
     width = max(2, len(str(max(V, U))))
+    names = [p.name for p in path.iterdir()] if overwrite and path.is_dir() else []
+    if names and all(map(_replaceable, names)) and "lightfield.json" not in names:  # (other files: atomic_dir)
+        raise FileExistsError(f"{path} holds views that write_lightfield did not write (it has no lightfield.json); "
+                              "refusing to replace it, choose another folder")
     with atomic_dir(path, overwrite=overwrite, replaceable=_replaceable) as tmp:
         for v in range(V):
             for u in range(U):
