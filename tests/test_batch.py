@@ -17,7 +17,8 @@ import pytest
 distributed = pytest.importorskip("distributed")
 pytestmark = pytest.mark.filterwarnings("ignore::napari_lfdeblur.io.ViewOrderWarning")  # random test scenes
 
-from napari_lfdeblur import blind_deblur, read_lightfield, simulate_blur, write_lightfield  # noqa: E402
+from napari_lfdeblur import (blind_deblur, read_lightfield, read_lightfield_with_metadata, simulate_blur,  # noqa: E402
+                            write_lightfield)
 from napari_lfdeblur.batch import deblur_many, item_seed, read_manifest, simulate_dataset, simulate_item  # noqa: E402
 from napari_lfdeblur.blind import BlindParams  # noqa: E402
 from napari_lfdeblur.cli import main  # noqa: E402
@@ -214,7 +215,7 @@ def test_a_killed_run_leaves_no_corrupt_file_and_a_rerun_completes_it(client, tm
     # what a kill at any other moment can leave: a writer's temporary file, an orphan path JSON,
     # a manifest line cut short, an output written but not yet recorded
     (out / ".k3.npz.tmp123-abcd.npz").write_bytes(b"partial")
-    (out / "k3.path.json").write_text("{}")
+    (out / "k3.path.json").write_text(json.dumps({"control_points": [[0, 0, 0], [1, 0, 0]], "lightfield": "k3.npz"}))
     with open(out / "manifest.jsonl", "a") as fh:
         fh.write('{"output": "k0.npz", "stat')
     second = deblur_many(paths, out, params=TINY, client=client, device="cpu")
@@ -231,6 +232,9 @@ def test_a_killed_run_leaves_no_corrupt_file_and_a_rerun_completes_it(client, tm
     (out / "manifest.jsonl").write_text("\n".join(lines) + "\n")
     third = deblur_many(paths, out, params=TINY, client=client, device="cpu")
     assert third.n_skipped == 3 and third.n_ok == 1 and read_manifest(out)["k1.npz"]["recovered"] is True
+    # with the verdict its file states (lfdeblur info counts it)
+    assert read_manifest(out)["k1.npz"]["blur_found"] == last["k1.npz"]["blur_found"]
+    assert read_manifest(out)["k1.npz"]["restoration"] == last["k1.npz"]["restoration"]
 
 
 def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
@@ -389,8 +393,18 @@ def test_a_pattern_takes_the_light_fields_it_matches_and_names_the_rest(tmp_path
         assert expand_inputs(str(tmp_path / "*")) == [tmp_path / "a.npz", tmp_path / "views"]
     with pytest.raises(ValueError, match=r"no light field matches .*\(it matches 1 other file\(s\), such as a.path"):
         expand_inputs(str(tmp_path / "*.json"))
-    listed = [tmp_path / "README.md", tmp_path / "a.npz"]  # given one by one: all kept (README fails as an item)
+    # given one by one, each must be there and of a kind the reader knows (its content is read by its item)
+    listed = [tmp_path / "views", tmp_path / "a.npz"]
     assert expand_inputs(listed) == listed
+    with pytest.raises(ValueError, match="input .*README.md is not a light field the reader knows$"):
+        expand_inputs([tmp_path / "README.md", tmp_path / "a.npz"])
+    with pytest.raises(FileNotFoundError, match="input .*late.npz does not exist"):
+        expand_inputs(str(tmp_path / "late.npz"))  # was an item named 'late.npz_0000.npz' that failed
+    (tmp_path / "scenes").mkdir()
+    write_lightfield(tmp_path / "scenes" / "s.npz", lf)
+    with pytest.raises(ValueError, match=r"scenes is not a light field the reader knows; for the files in it pass "
+                                         r"a pattern such as '.*scenes/\*'"):
+        expand_inputs(tmp_path / "scenes")
 
 
 def test_a_script_without_a_main_guard_gets_told_why_the_workers_failed(tmp_path):
@@ -422,6 +436,8 @@ def test_a_script_without_a_main_guard_gets_told_why_the_workers_failed(tmp_path
     ({"n_times": 2.5}, TypeError, "n_times must be an integer"),
     ({"infinity_disparity": float("nan")}, ValueError, "infinity_disparity must be finite"),
     ({"device": "cuda"}, ValueError, "no CUDA GPU"),
+    ({"workers": 0}, ValueError, "workers must be an integer >= 1"),
+    ({"client": 42}, TypeError, "client must be a distributed.Client"),
 ])
 def test_bad_arguments_fail_before_the_run_starts(inputs, tmp_path, kwargs, error, message):
     import torch
@@ -432,7 +448,44 @@ def test_bad_arguments_fail_before_the_run_starts(inputs, tmp_path, kwargs, erro
     with pytest.raises(error, match=message):
         simulate_dataset(inputs, out, **kwargs)
     assert not out.exists()  # no cluster started, no manifest written
-    if "device" not in kwargs and "noise" not in kwargs and "n_times" not in kwargs:
+    if not {"device", "noise", "n_times"} & set(kwargs):
         with pytest.raises(error, match=message):
             deblur_many(inputs, out, **kwargs)
         assert not out.exists()
+
+
+def test_outputs_state_their_blur_and_other_files_are_never_replaced(client, inputs, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "scene0_0000.path.json").write_text('{"my": "precious path"}')  # a file of the user's, of an item's name
+    np.savez(out / "scene1_0000.npz", weights=np.ones(3))  # not a light field
+    report = simulate_dataset(inputs, out, infinity_disparity=1.0, n_times=8, client=client, device="cpu")
+    assert (report.n_ok, report.n_failed) == (1, 2)
+    assert all("is not this item's" in r["error"] and "--overwrite" in r["error"] for r in report.failed)
+    assert (out / "scene0_0000.path.json").read_text() == '{"my": "precious path"}'
+    assert list(np.load(out / "scene1_0000.npz")) == ["weights"]
+    # the output says what it was blurred with, so that deblurring it takes its infinity disparity
+    meta = read_lightfield_with_metadata(out / "scene2_0000.npz")[1]
+    assert (meta["infinity_disparity"], meta["n_times"]) == (1.0, 8)
+    assert json.loads((out / "scene2_0000.path.json").read_text())["lightfield"] == "scene2_0000.npz"
+    deblur_many(out / "scene2_0000.npz", tmp_path / "deblurred", params=TINY, client=client, device="cpu")
+    assert json.loads((tmp_path / "deblurred" / "scene2_0000.path.json").read_text())["infinity_disparity"] == 1.0
+
+
+def test_cli_batch_refuses_before_it_starts(inputs, tmp_path, capsys):
+    import torch
+
+    out = tmp_path / "o"
+    (tmp_path / "in").mkdir()
+    write_lightfield(tmp_path / "in" / "a.npz", read_lightfield(inputs[0]))
+    (tmp_path / "in" / "notes.txt").write_text("not a light field")
+    pattern = str(tmp_path / "in" / "*")
+    if not torch.cuda.is_available():  # the embedded cluster would run here: refused up front, no folder made
+        assert main(["batch", "simulate", pattern, str(out), "--device", "cuda"]) == 2
+        err = capsys.readouterr().err
+        assert "no CUDA GPU" in err and not out.exists()
+        assert err.count("skipped 1 match(es) that are not light fields: notes.txt") == 1  # said once
+    assert main(["batch", "simulate", str(inputs[0]), str(out), "--n-per-input", "0"]) == 2
+    assert "--n-per-input must be >= 1; got 0" in capsys.readouterr().err and not out.exists()
+    assert main(["batch", "deblur", pattern, str(tmp_path / "in")]) == 2  # into the inputs' own folder
+    assert "would replace it: choose another output folder" in capsys.readouterr().err

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import _thread
 import contextlib
+import logging
 import shlex
 import sys
 import threading
@@ -114,12 +115,14 @@ def run_batch(args) -> int:
 
 
 def _run(args) -> int:
-    from .batch import connect, deblur_many, expand_inputs, simulate_dataset
+    from .batch import deblur_many, expand_inputs, simulate_dataset
     from .batch._worker_setup import fold_dask_tracebacks
 
-    n_inputs = len(expand_inputs(args.inputs))
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1; got {args.workers}")
+    inputs = expand_inputs(args.inputs)
+    n_inputs = len(inputs)
+    for flag, value in (("--workers", args.workers), ("--n-per-input", getattr(args, "n_per_input", 1))):
+        if value is not None and value < 1:
+            raise ValueError(f"{flag} must be >= 1; got {value}")
     if args.batch_command == "simulate" and args.infinity_disparity is None:
         args.infinity_disparity = 0.0
     command = _command(args)
@@ -131,28 +134,47 @@ def _run(args) -> int:
     else:
         total, run, options = n_inputs, deblur_many, dict(params=_params(args))
     fold_dask_tracebacks()  # this process's; the embedded workers fold their own
-    with ctrl_c_never_swallowed(), connect(args.scheduler, workers=args.workers, device=args.device) as client:
-        print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr, flush=True)
-        bar = _bar(total)
+    bar = []  # made at the first item: arguments are checked and the cluster started before
 
-        def show(rec):
-            if rec["status"] == "failed":
-                bar.write(f"failed: {rec['input']} -> {rec['output']}: {rec['error']}", file=sys.stderr)
-            bar.update(1)
+    def show(rec):
+        if not bar:
+            bar.append(_bar(total))
+        if rec["status"] == "failed":
+            bar[0].write(f"failed: {rec['input']} -> {rec['output']}: {rec['error']}", file=sys.stderr)
+        bar[0].update(1)
 
-        try:
-            report = run(args.inputs, args.out_dir, infinity_disparity=args.infinity_disparity, seed=args.seed,
-                         value_range=args.value_range, client=client, device=args.device, overwrite=args.overwrite,
-                         callback=show, command=command, **options)
+    with ctrl_c_never_swallowed(), _dashboard_on_stderr():
+        try:  # the cluster is started (or the scheduler reached) only once the arguments and folder are checked
+            report = run(inputs, args.out_dir, infinity_disparity=args.infinity_disparity, seed=args.seed,
+                         value_range=args.value_range, client=args.scheduler, workers=args.workers,
+                         device=args.device, overwrite=args.overwrite, callback=show, command=command, **options)
         finally:
-            bar.close()
+            if bar:
+                bar[0].close()
     done = f"{report.n_ok} done, {report.n_skipped} already done (skipped)" + weak_blur_summary(report.records)
     if report.n_failed:
         print(f"lfdeblur batch {args.batch_command}: {report.n_failed} of {total} items failed ({done}); "
-              f"see {Path(args.out_dir) / 'manifest.jsonl'}; rerun the same command to redo them", file=sys.stderr)
+              f"see {Path(args.out_dir) / 'manifest.jsonl'}; once their errors are dealt with, rerun the same "
+              "command to redo them", file=sys.stderr)
         return 1
     print(f"all {total} items in {args.out_dir} ({done})")
     return 0
+
+
+@contextlib.contextmanager
+def _dashboard_on_stderr():
+    """Within it, the batch's log of the dask dashboard's address is printed on stderr."""
+    log = logging.getLogger("napari_lfdeblur.batch")
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    level = log.level
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)
 
 
 @contextlib.contextmanager

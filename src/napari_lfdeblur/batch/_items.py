@@ -8,6 +8,7 @@ Light fields never travel between the client, the scheduler and the workers.
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 import os
 import socket
@@ -195,22 +196,50 @@ def _deblur(lf, spec: dict, device, meta: dict):
     return result.lightfield, result.control_points, extra
 
 
+#: what an item's output file states besides its path: the blur's instants and d_inf, the blind verdict
+_STATED = ("n_times", "infinity_disparity", "blur_found", "restoration")
+
+
 def _recover(spec: dict, out: Path) -> dict:
     """An output that exists but is not in the manifest: keep it if it is this item's, else refuse.
 
-    Returns None when the file cannot be read as a light field (cut short): the item is redone.
+    Returns None when the file cannot be read as a light field but the manifest records an output of this
+    item there (``spec['recorded']``: damaged since): the item is redone. Unreadable and unrecorded, it is
+    another file (this package writes atomically), and refused.
     """
     from ..io import LightFieldError, read_lightfield_with_metadata
     from ..io._write import jsonable
 
     try:
         lf, meta = read_lightfield_with_metadata(out)
-    except (LightFieldError, OSError, ValueError):  # a partial or corrupt file: redo the item
-        return None
-    saved = meta.get("saved_metadata", {}).get("batch")
-    if saved != jsonable(item_metadata(spec)) or not Path(spec["path_json"]).is_file():
-        raise FileExistsError(f"{out} exists and is not this item's output; pass overwrite to replace it")
-    return {"shape": list(lf.shape), "recovered": True}
+    except (LightFieldError, OSError, ValueError) as exc:
+        if spec.get("recorded"):
+            return None
+        raise FileExistsError(f"{out} exists and is not this item's output (it is not a light field: {exc}); "
+                              "pass overwrite=True (command line: --overwrite) to replace it") from None
+    stated = meta.get("saved_metadata", {})
+    if stated.get("batch") != jsonable(item_metadata(spec)) or not Path(spec["path_json"]).is_file():
+        raise FileExistsError(f"{out} exists and is not this item's output; pass overwrite=True (command line: "
+                              "--overwrite) to replace it")
+    verdict = {k: stated[k] for k in ("blur_found", "restoration") if k in stated}
+    return {"shape": list(lf.shape), "recovered": True, **verdict}
+
+
+def _check_path_file(spec: dict, out: Path) -> None:
+    """Refuse to replace a path file at the item's path-file name that is not this item's (without overwrite).
+
+    Its own names ``out`` (``lightfield``), or the manifest records an output of this item there.
+    """
+    path_json = Path(spec["path_json"])
+    if spec["overwrite"] or spec.get("recorded") or not path_json.exists():
+        return
+    try:
+        doc = json.loads(path_json.read_text())
+    except (OSError, ValueError):
+        doc = None
+    if not (isinstance(doc, dict) and doc.get("lightfield") == out.name):
+        raise FileExistsError(f"{path_json} exists and is not this item's path file; pass overwrite=True "
+                              "(command line: --overwrite) to replace it")
 
 
 def run_item(spec: dict) -> dict:
@@ -249,12 +278,15 @@ def _run(spec: dict, out: Path, rec: dict) -> None:
         if kept is not None:
             rec.update(kept)
         else:
+            _check_path_file(spec, out)
             compute = _simulate if spec["kind"] == "simulate" else _deblur
             lf, meta = read_lightfield_with_metadata(spec["input"], value_range=spec["parameters"].get("value_range"))
             result, cp, extra = compute(lf, spec, device, meta)
-            save_path_json(spec["path_json"], cp, overwrite=True, **extra, view_shape=lf.shape[2:4])
+            save_path_json(spec["path_json"], cp, overwrite=True, **extra, view_shape=lf.shape[2:4],
+                           lightfield=out.name)
+            # what the file states of its blur (read back, as by deconvolve and deblur) and of the verdict
             meta = {"batch": item_metadata(spec), "control_points": np.asarray(cp).tolist(),
-                    "version": spec["version"]}
+                    "version": spec["version"], **{k: extra[k] for k in _STATED if k in extra}}
             write_lightfield(out, result, overwrite=spec["overwrite"] or out.exists(), metadata=meta,
                              compress=False)
             rec["shape"] = list(result.shape)

@@ -5,7 +5,9 @@ from __future__ import annotations
 import datetime
 import glob
 import json
+import logging
 import os
+import shutil
 import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -141,7 +143,9 @@ def connect(client=None, *, workers: int | None = None, device: str = "auto"):
     Yields
     ------
     distributed.Client
-        Closed on exit when this function made it (with its cluster).
+        Closed on exit when this function made it (with its cluster); its
+        dashboard's address is then logged (logger ``napari_lfdeblur.batch``,
+        INFO), which the command line prints.
     """
     distributed = _distributed()
     if isinstance(client, distributed.Client):
@@ -149,12 +153,10 @@ def connect(client=None, *, workers: int | None = None, device: str = "auto"):
         return
     if isinstance(client, (str, os.PathLike)):
         with distributed.Client(str(client)) as c:
+            _announce(c)
             yield c
         return
-    if client is not None:
-        raise TypeError(f"client must be a distributed.Client, a scheduler address or None; got {client!r}")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise ValueError(f"workers must be an integer >= 1; got {workers!r}")
+    _check_client(client, workers, device)
     import torch
 
     gpu = device == "cuda" or (device == "auto" and torch.cuda.is_available())
@@ -170,7 +172,28 @@ def connect(client=None, *, workers: int | None = None, device: str = "auto"):
     except RuntimeError as exc:  # e.g. "Nanny failed to start worker process"
         raise RuntimeError(f"the embedded cluster's workers did not start ({exc}); {_MAIN_GUARD}") from exc
     with cluster, distributed.Client(cluster) as c:
+        _announce(c)
         yield c
+
+
+def _announce(client) -> None:
+    """Log (``napari_lfdeblur.batch``, INFO) where the dashboard of a cluster this package connected to is."""
+    logging.getLogger("napari_lfdeblur.batch").info("dask dashboard: %s", client.dashboard_link)
+
+
+def _check_client(client, workers, device) -> None:
+    """The arguments of :func:`connect` checked before anything starts; for the embedded cluster (``client``
+    None) with ``device='cuda'``, that this machine has a CUDA GPU."""
+    if client is not None and not isinstance(client, (str, os.PathLike, _distributed().Client)):
+        raise TypeError(f"client must be a distributed.Client, a scheduler address or None; got {client!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers must be an integer >= 1; got {workers!r}")
+    if device not in ("auto", "cpu", "cuda"):
+        raise ValueError(f"device must be 'auto', 'cpu' or 'cuda'; got {device!r}")
+    if device == "cuda" and client is None:  # the embedded cluster runs here: no GPU, no run
+        from ..devices import select_device
+
+        select_device(device)
 
 
 def gpu_workers(client) -> int:
@@ -186,8 +209,9 @@ def expand_inputs(inputs) -> list[Path]:
     (:func:`~napari_lfdeblur.io.detect_layout`: a light-field suffix or a
     folder of views), so that ``'out/*'`` over a batch's output folder takes
     its light fields, not its path files, manifest and README; the others are
-    named in a warning. Paths given one by one are all kept (an unreadable
-    one becomes a failed item).
+    named in a warning. Paths given one by one must exist and be of a kind
+    the reader knows (a folder holds views; for the files in a folder pass
+    a pattern); one whose content cannot be read becomes a failed item.
     """
     if isinstance(inputs, (str, os.PathLike)):
         text = str(inputs)
@@ -211,6 +235,11 @@ def expand_inputs(inputs) -> list[Path]:
         raise ValueError("no inputs")
     names = {}
     for p in paths:
+        if not p.exists():
+            raise FileNotFoundError(f"input {p} does not exist")
+        if not _lightfield_kind(p):
+            hint = f"; for the files in it pass a pattern such as '{p / '*'}'" if p.is_dir() else ""
+            raise ValueError(f"input {p} is not a light field the reader knows{hint}")
         if p.name in names:
             raise ValueError(f"inputs {names[p.name]} and {p} share the name {p.name!r}; their outputs and "
                              "seeds would collide: rename one")
@@ -297,25 +326,45 @@ def run_batch(specs: list, out_dir: Path, *, client, workers, device, card: dict
     """
     if _starting_process():
         raise RuntimeError(_MAIN_GUARD)
-    if device not in ("auto", "cpu", "cuda"):
-        raise ValueError(f"device must be 'auto', 'cpu' or 'cuda'; got {device!r}")
-    if device == "cuda" and client is None:  # the embedded cluster runs here: no GPU, no run
-        from ..devices import select_device
-
-        select_device(device)
+    _check_client(client, workers, device)
     outputs = [Path(s["output"]).name for s in specs]
     if len(set(outputs)) < len(outputs):
         dup = sorted({o for o in outputs if outputs.count(o) > 1})
         raise ValueError(f"several inputs would write {', '.join(dup[:3])}: rename them")
+    clash = [s["input"] for s in specs if Path(s["input"]).resolve() == Path(s["output"]).resolve()]
+    if clash:
+        raise ValueError(f"the output of {clash[0]} would replace it: choose another output folder")
     if out_dir.exists() and not out_dir.is_dir():
         raise NotADirectoryError(f"{out_dir} is a file; a batch writes into a folder")
+    created = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        return _run_in(specs, out_dir, client=client, workers=workers, device=device, card=card, callback=callback)
+    except BaseException:
+        if created:
+            _remove_if_unused(out_dir)
+        raise
+
+
+def _remove_if_unused(out_dir: Path) -> None:
+    """Remove a folder this run made when the run failed before writing anything but its card and an empty
+    manifest (a cluster that did not start, a scheduler out of reach)."""
+    from ._manifest import CARD, MANIFEST
+
+    entries = {p.name: p for p in out_dir.iterdir()}
+    if set(entries) <= {CARD, MANIFEST} and (MANIFEST not in entries or entries[MANIFEST].stat().st_size == 0):
+        shutil.rmtree(out_dir, ignore_errors=True)
+
+
+def _run_in(specs, out_dir: Path, *, client, workers, device, card, callback) -> BatchReport:
+    """:func:`run_batch` once ``out_dir`` exists."""
     check_card(out_dir)
     with open_manifest(out_dir) as manifest:
         last = read_manifest(out_dir)
         records, todo = [None] * len(specs), []
         for i, spec in enumerate(specs):
             prev = last.get(Path(spec["output"]).name)
+            spec["recorded"] = prev is not None and prev.get("status") == "ok"  # an output of ours was there
             if _is_done(spec, prev):
                 records[i] = {**prev, "status": "skipped"}
                 if callback is not None:

@@ -390,7 +390,8 @@ def write_lightfield(
         sidecar = None if owner is not None else sidecar
     if sidecar is not None and layout != "views":
         check_writable(sidecar, overwrite)
-    if cp is None and layout != "views" and not overwrite and _names_path(path):
+    pathless = cp is None and "control_points" not in meta  # (a path in metadata is kept in the file too)
+    if pathless and layout != "views" and not overwrite and _names_path(path):
         raise FileExistsError(f"{path_json_beside(path)} exists and holds the camera path of an earlier {path.name}; "
                               "pass overwrite=True to replace it, or move it away")
 
@@ -418,7 +419,7 @@ def write_lightfield(
     elif owner is not None:
         warnings.warn(f"{path_json_beside(path).name} belongs to {owner.name} and was left as it is; the camera "
                       f"path of {path.name} is stored in the file itself", stacklevel=2)
-    elif overwrite and _names_path(path):  # what was replaced had a path: it is not this file's
+    elif pathless and overwrite and _names_path(path):  # what was replaced had a path: it is not this file's
         path_json_beside(path).unlink()
     return path
 
