@@ -383,6 +383,23 @@ def test_writer_eslf_round_trip(tmp_path, lf_rgb):
         np.testing.assert_allclose(read_lightfield(p, angular_size=3), lf, atol=0.5 / 65535 + 1e-7)
 
 
+@pytest.mark.parametrize("name, layout", [("e.png", "eslf"), ("e.tif", "eslf"), ("m.png", "mosaic"),
+                                          ("m.tif", "mosaic")])
+def test_a_mosaic_written_here_is_read_back_without_options(tmp_path, name, layout):
+    # 4x4 views of 12x18 px: the lenslet size has many candidates (2, 3, 4, 6) and a grid is never guessed
+    lf = np.random.default_rng(1).random((4, 4, 12, 18, 3)).astype(np.float32)
+    p = write_lightfield(tmp_path / name, lf, layout=layout, bit_depth=16)
+    assert detect_layout(p) == probe_layout(p) == layout  # the file states it (no eslf in the name)
+    back, meta = read_lightfield_with_metadata(p)
+    np.testing.assert_allclose(back, lf, atol=0.5 / 65535 + 1e-7)
+    assert meta.get("angular_size", 4) == 4 and meta.get("grid", [4, 4]) == [4, 4]
+    # a plain image of the same size states nothing: still refused, with the options to pass
+    plain = tmp_path / f"plain{Path(name).suffix}"
+    iio.imwrite(plain, (lf[0, 0] * 255).astype(np.uint8))
+    with pytest.raises(LightFieldFormatError, match="layout='eslf'.*layout='mosaic'"):
+        read_lightfield(plain)
+
+
 def test_writer_outputs_readable_by_other_tools(tmp_path, lf_rgb):
     write_lightfield(tmp_path / "v", lf_rgb)
     np.testing.assert_array_equal(iio.imread(tmp_path / "v" / "view_02_04.png"), _u8(lf_rgb[1, 3]))

@@ -199,3 +199,20 @@ def test_public_modules_list_only_names_they_define():
         mod = importlib.import_module(f"napari_lfdeblur.{module}")
         for name in getattr(mod, "__all__", []):
             assert hasattr(mod, name), f"napari_lfdeblur.{module}.__all__ lists {name}, which it lacks"
+
+
+def test_reader_patterns_cover_every_file_the_reader_detects(tmp_path):
+    """napari offers the plugin's reader only for names its manifest's patterns match."""
+    import fnmatch
+
+    from npe2 import PluginManifest
+
+    from napari_lfdeblur.io import detect_layout
+
+    (reader,) = PluginManifest.from_file(ROOT / "napari.yaml").contributions.readers
+    names = ["a.npz", "a.npy", "a.tif", "a.tiff", "a.h5", "a.hdf5", "a.he5", "a.mat", "x.eslf.png", "X.ESLF.png",
+             "x_eslf.png", "x.eslf.jpg", "x.eslf.jpeg", "x.eslf.bmp", "x.eslf.tif"]
+    for name in names:
+        (tmp_path / name).write_bytes(b"")
+        assert detect_layout(tmp_path / name)  # the reader knows the kind by the name
+        assert any(fnmatch.fnmatchcase(name, p) for p in reader.filename_patterns), name

@@ -74,6 +74,16 @@ def test_synthetic_scene_bad_input():
         synthetic_scene((5, 5, 8, 8), n_layers=0)
 
 
+def test_the_shipped_sample_file_opens_as_itself():
+    """File > Open of the sample's PNG (napari offers the plugin's reader): its lenslet size is stated in it."""
+    from napari_lfdeblur._napari.reader import napari_get_reader
+    from napari_lfdeblur.samples import _lytro
+
+    (data, kwargs, kind), = napari_get_reader(str(_lytro._FILE))(str(_lytro._FILE))
+    np.testing.assert_array_equal(data, lytro_sample())
+    assert kind == "image" and kwargs["rgb"]
+
+
 def test_lytro_sample_is_the_crop_of_the_capture():
     lf = lytro_sample()
     assert lf.shape == (9, 9, 128, 128, 3) and lf.dtype == np.float32

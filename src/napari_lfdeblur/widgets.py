@@ -13,8 +13,9 @@ metadata that can hold the camera path it was blurred by, EPIs and camera
 paths. Each ``*_layer_data`` function returns a napari layer data tuple
 ``(data, kwargs, layer_type)``; :func:`add_layer` adds one to a viewer.
 
-Importing this module needs napari and Qt (``pip install
-"napari-lfdeblur[napari]"``); ``import napari_lfdeblur`` needs neither.
+Importing this module needs napari and a Qt binding (``pip install
+"napari-lfdeblur[napari]" pyqt6``, or ``"napari-lfdeblur[all]"``);
+``import napari_lfdeblur`` needs neither.
 docs/headless.md shows each widget driven from a script.
 """
 
@@ -26,7 +27,8 @@ try:
 except ImportError as exc:  # the library works without them; this module does not
     raise ImportError(
         f"napari_lfdeblur.widgets needs napari and Qt ({exc}); install them with "
-        "pip install \"napari-lfdeblur[napari]\", or use the core functions of napari_lfdeblur without a viewer"
+        "pip install \"napari-lfdeblur[napari]\" pyqt6 (napari and a Qt binding; or \"napari-lfdeblur[all]\"), "
+        "or use the core functions of napari_lfdeblur without a viewer"
     ) from exc
 
 from ._napari.layers import (

@@ -10,7 +10,8 @@
 ``hci``       folder of HCI benchmark ``input_CamNNN.png`` (+ parameters.cfg)
 ``stanford``  folder of Stanford gantry ``out_RR_CC_*.png`` (0-based)
 ``eslf``      lenslet mosaic ``*.eslf.png``: pixel ``(y*A + v, x*A + u)``
-``mosaic``    views tiled in one image: pixel ``(v*Y + y, u*X + x)``
+``mosaic``    views tiled in one image: pixel ``(v*Y + y, u*X + x)`` (detected
+              when the image states it, as ``write_lightfield`` writes both)
 ``mat``       Light Field Toolbox ``.mat`` (MATLAB v5 or v7.3), variable LF
 ``h5``        HDF5 dataset ``LF`` (or the only 4D/5D one)
 ``npy``       ``.npy`` array
@@ -129,6 +130,12 @@ def detect_layout(path) -> str:
         return {"rc": "views", "hci": "hci", "stanford": "stanford"}[scheme]
     name = path.name.lower()
     suffix = path.suffix.lower()
+    if suffix in _IMAGE_SUFFIXES + (".tif", ".tiff") and path.is_file():
+        from ._mosaic import stated_layout
+
+        stated = stated_layout(path).get("layout")  # a mosaic written by write_lightfield says so
+        if stated:
+            return stated
     if suffix in _SUFFIX_LAYOUT and not (suffix in (".tif", ".tiff") and "eslf" in name):
         return _SUFFIX_LAYOUT[suffix]
     if suffix in _IMAGE_SUFFIXES or suffix in (".tif", ".tiff"):

@@ -10,6 +10,7 @@ View-grid mosaic
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -17,8 +18,42 @@ import numpy as np
 from ._arrays import kept_views
 from ._common import LightFieldFormatError, check_memory, to_float01
 from ._images import image_props, read_image
+from ._png import png_text
 
 DEFAULT_ANGULAR_SIZE = 14
+#: the PNG text keyword (TIFF: shaped-metadata key) under which a mosaic written by this package states its layout
+LAYOUT_KEY = "lfdeblur_layout"
+
+
+def mosaic_layout_text(layout: str, shape) -> str:
+    """What a mosaic image of the light field ``shape`` states about its layout (JSON), as written."""
+    V, U = (int(n) for n in shape[:2])
+    return json.dumps({"layout": "eslf", "angular_size": V} if layout == "eslf" else {"layout": "mosaic", "grid": [V, U]})
+
+
+def stated_layout(path) -> dict:
+    """The layout an image file states (``{'layout': 'eslf', 'angular_size': A}`` or ``{'layout':
+    'mosaic', 'grid': [V, U]}``), as :func:`~napari_lfdeblur.io.write_lightfield` writes it; ``{}`` when it
+    states none or cannot be read."""
+    path = Path(path)
+    try:
+        if path.suffix.lower() in (".tif", ".tiff"):
+            import tifffile
+
+            with tifffile.TiffFile(path) as tif:
+                text = (tif.shaped_metadata or [{}])[0].get(LAYOUT_KEY)
+        else:
+            text = png_text(path).get(LAYOUT_KEY)
+        doc = json.loads(text) if text else {}
+    except Exception:  # noqa: BLE001 - a statement that cannot be read is none
+        return {}
+    if isinstance(doc, dict) and doc.get("layout") == "eslf" and isinstance(doc.get("angular_size"), int):
+        return doc
+    grid = doc.get("grid") if isinstance(doc, dict) else None
+    if doc.get("layout") == "mosaic" and isinstance(grid, list) and len(grid) == 2 and all(
+            isinstance(g, int) and g > 0 for g in grid):
+        return doc
+    return {}
 
 
 def detect_angular_size(height: int, width: int, path="mosaic") -> int:
@@ -50,8 +85,9 @@ def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, m
     Parameters
     ----------
     angular_size : int, optional
-        Lenslet size ``A`` in pixels (views per side). Default 14, or the only
-        size that divides the image.
+        Lenslet size ``A`` in pixels (views per side). Default: the one the
+        file states (as :func:`~napari_lfdeblur.io.write_lightfield` writes
+        it), else 14, else the only size that divides the image.
     angular_crop : int or (int, int), optional
         Keep only the central ``n x n`` (or ``n_v x n_u``) views (the outer
         ones of a Lytro ESLF are dark).
@@ -65,7 +101,7 @@ def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, m
     shape, dtype = image_props(path)
     H, W = shape[:2]
     if angular_size is None:
-        A = detect_angular_size(H, W, path)
+        A = stated_layout(path).get("angular_size") or detect_angular_size(H, W, path)
     else:
         A = int(angular_size)
         if A < 1:
@@ -88,7 +124,9 @@ def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, m
 def read_mosaic(path, *, grid=None, value_range=None, max_bytes=None, angular_crop=None):
     """Read a view-grid mosaic: views tiled as ``grid = (V, U)`` blocks.
 
-    ``angular_crop`` keeps the central views, as in :func:`read_eslf`.
+    ``grid`` defaults to the one the file states (as
+    :func:`~napari_lfdeblur.io.write_lightfield` writes it). ``angular_crop``
+    keeps the central views, as in :func:`read_eslf`.
 
     Returns
     -------
@@ -96,6 +134,7 @@ def read_mosaic(path, *, grid=None, value_range=None, max_bytes=None, angular_cr
     metadata : dict
     """
     path = Path(path)
+    grid = grid or stated_layout(path).get("grid")
     if grid is None:
         raise LightFieldFormatError(
             f"{path}: a view-grid mosaic needs its grid size; pass grid=(V, U) (views down, views across)"

@@ -32,6 +32,26 @@ def png_header(path) -> dict | None:
     return {"width": w, "height": h, "bit_depth": depth, "color_type": ctype, "interlace": interlace}
 
 
+def png_text(path) -> dict:
+    """The ``tEXt`` chunks before a PNG's image data, ``{keyword: value}`` (empty for other files)."""
+    out = {}
+    with open(path, "rb") as fh:
+        if fh.read(8) != _SIGNATURE:
+            return out
+        while True:
+            head = fh.read(8)
+            if len(head) < 8:
+                return out
+            size, kind = struct.unpack(">I", head[:4])[0], head[4:]
+            if kind in (b"IDAT", b"IEND"):
+                return out
+            body = fh.read(size)
+            fh.seek(4, 1)  # the CRC
+            if kind == b"tEXt" and b"\0" in body:
+                key, _, value = body.partition(b"\0")
+                out[key.decode("latin-1")] = value.decode("latin-1")
+
+
 def needs_own_decoder(header: dict | None) -> bool:
     """True for PNGs that Pillow would decode lossily (16-bit with colour or alpha)."""
     return bool(header) and header["bit_depth"] == 16 and header["color_type"] in (2, 4, 6)
@@ -41,11 +61,12 @@ def _chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
 
 
-def write_png(path, img: np.ndarray, *, level: int = 6) -> None:
+def write_png(path, img: np.ndarray, *, level: int = 6, text: dict | None = None) -> None:
     """Write a uint8 or uint16 image of shape (H, W) or (H, W, C), C in 1..4.
 
     Rows use the PNG "Up" filter, which compresses smooth images well and
-    decodes fast.
+    decodes fast. ``text`` (Latin-1 keywords and values) goes into ``tEXt``
+    chunks, which :func:`png_text` reads back.
     """
     img = np.asarray(img)
     if img.dtype not in (np.uint8, np.uint16):
@@ -63,7 +84,9 @@ def write_png(path, img: np.ndarray, *, level: int = 6) -> None:
     up[1:] -= raw[:-1]  # uint8 arithmetic wraps, as the filter wants
     data = np.concatenate([np.full((h, 1), 2, np.uint8), up], axis=1).tobytes()
     ihdr = struct.pack(">IIBBBBB", w, h, depth, ctype, 0, 0, 0)
-    blob = _SIGNATURE + _chunk(b"IHDR", ihdr) + _chunk(b"IDAT", zlib.compress(data, level)) + _chunk(b"IEND", b"")
+    texts = b"".join(_chunk(b"tEXt", k.encode("latin-1") + b"\0" + v.encode("latin-1")) for k, v in (text or {}).items())
+    blob = (_SIGNATURE + _chunk(b"IHDR", ihdr) + texts + _chunk(b"IDAT", zlib.compress(data, level))
+            + _chunk(b"IEND", b""))
     with open(path, "wb") as fh:
         fh.write(blob)
 

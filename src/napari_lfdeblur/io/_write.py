@@ -22,7 +22,7 @@ from ._common import (
     to_float01,
     validate_lightfield,
 )
-from ._mosaic import lightfield_to_mosaic
+from ._mosaic import LAYOUT_KEY, lightfield_to_mosaic, mosaic_layout_text
 from ._png import write_png
 
 WRITE_LAYOUTS = ("npz", "npy", "tiff", "h5", "views", "mosaic", "eslf")
@@ -187,13 +187,14 @@ def _write_mosaic(path, data, layout, *, overwrite):
     if layout == "eslf" and data.shape[0] != data.shape[1]:
         raise LightFieldFormatError(f"cannot write {path} as ESLF: it needs V == U, got {data.shape[:2]}")
     img = lightfield_to_mosaic(data, "grid" if layout == "mosaic" else "eslf")
+    stated = {LAYOUT_KEY: mosaic_layout_text(layout, data.shape)}  # read back without options
     with atomic_file(path, overwrite=overwrite) as tmp:
         if path.suffix.lower() in (".tif", ".tiff"):
             import tifffile
 
-            tifffile.imwrite(tmp, img, photometric="rgb" if img.ndim == 3 else "minisblack")
+            tifffile.imwrite(tmp, img, photometric="rgb" if img.ndim == 3 else "minisblack", metadata=stated)
         elif path.suffix.lower() == ".png":
-            write_png(tmp, img)
+            write_png(tmp, img, text=stated)
         else:
             raise LightFieldFormatError(f"{path}: a mosaic is written as .png or .tif")
 
