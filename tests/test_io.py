@@ -1084,3 +1084,19 @@ def test_a_truncated_tiff_is_a_read_error(tmp_path, lf_gray, capsys):
     with pytest.raises(LightFieldReadError, match=r"half.tif: a truncated or corrupt TIFF file \(tifffile: "):
         read_lightfield(tmp_path / "half.tif")  # was a 2D-series LightFieldFormatError after two log lines
     assert capsys.readouterr().err == ""
+
+
+def test_an_opaque_alpha_channel_is_dropped_from_views_as_from_mosaics(tmp_path, lf_rgb):
+    rgb8 = _u8(lf_rgb)
+    rgba = np.concatenate([rgb8, np.full(rgb8.shape[:-1] + (1,), 255, np.uint8)], axis=-1)
+    for name, data in (("opaque", rgba), ("translucent", np.where(np.arange(4) == 3, rgba // 2, rgba))):
+        folder = tmp_path / name
+        folder.mkdir()
+        for v in range(rgba.shape[0]):
+            for u in range(rgba.shape[1]):
+                iio.imwrite(folder / f"view_{v + 1:02d}_{u + 1:02d}.png", data[v, u])
+        back = read_lightfield(folder)
+        if name == "opaque":  # the same colour light field as without the channel
+            np.testing.assert_array_equal(back, read_lightfield(write_lightfield(tmp_path / "rgb", lf_rgb)))
+        else:  # transparency is data: kept
+            assert back.shape[-1] == 4

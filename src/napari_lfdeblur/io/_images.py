@@ -27,6 +27,15 @@ def _squeeze_channels(img: np.ndarray, path) -> np.ndarray:
     return img
 
 
+def drop_opaque_alpha(img: np.ndarray) -> np.ndarray:
+    """``img`` (one image or a stack, channels last) without its alpha channel when that is opaque everywhere."""
+    if img.ndim >= 3 and img.shape[-1] == 4:
+        top = np.iinfo(img.dtype).max if np.issubdtype(img.dtype, np.integer) else 1.0
+        if np.all(img[..., 3] == top):
+            return img[..., :3]
+    return img
+
+
 def image_props(path) -> tuple[tuple[int, ...], np.dtype]:
     """Shape and dtype of an image without decoding its pixels (when possible).
 

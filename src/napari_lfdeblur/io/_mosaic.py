@@ -17,7 +17,7 @@ import numpy as np
 
 from ._arrays import kept_views
 from ._common import LightFieldFormatError, check_memory, to_float01
-from ._images import image_props, read_image
+from ._images import drop_opaque_alpha, image_props, read_image
 from ._png import png_text
 
 DEFAULT_ANGULAR_SIZE = 14
@@ -71,13 +71,6 @@ def detect_angular_size(height: int, width: int, path="mosaic") -> int:
     )
 
 
-def _drop_opaque_alpha(img: np.ndarray) -> np.ndarray:
-    if img.ndim == 3 and img.shape[2] == 4:
-        top = np.iinfo(img.dtype).max if np.issubdtype(img.dtype, np.integer) else 1.0
-        if np.all(img[..., 3] == top):
-            return img[..., :3]
-    return img
-
 
 def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, max_bytes=None):
     """Read an ESLF lenslet mosaic.
@@ -111,7 +104,7 @@ def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, m
     meta = {"layout": "eslf", "angular_size": A, "mosaic_shape": [H, W]}
     index, out, _ = kept_views((A, A, H // A, W // A) + tuple(shape[2:]), None, None, angular_crop, path, meta)
     check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=out)
-    img = _drop_opaque_alpha(read_image(path))
+    img = drop_opaque_alpha(read_image(path))
     Y, X = img.shape[0] // A, img.shape[1] // A
     img = img[: Y * A, : X * A]
     lf = img.reshape((Y, A, X, A) + img.shape[2:])
@@ -151,7 +144,7 @@ def read_mosaic(path, *, grid=None, value_range=None, max_bytes=None, angular_cr
     meta = {"layout": "mosaic", "grid": [V, U], "mosaic_shape": [H, W]}
     index, out, _ = kept_views((V, U, H // V, W // U) + tuple(shape[2:]), None, None, angular_crop, path, meta)
     check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=out)
-    img = _drop_opaque_alpha(read_image(path))
+    img = drop_opaque_alpha(read_image(path))
     Y, X = H // V, W // U
     lf = img.reshape((V, Y, U, X) + img.shape[2:]).swapaxes(1, 2)
     meta["file_dtype"] = str(img.dtype)

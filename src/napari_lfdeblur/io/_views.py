@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ._common import LightFieldFormatError, central_views, check_memory, to_float01
-from ._images import IMAGE_EXTENSIONS, image_props, read_image
+from ._images import IMAGE_EXTENSIONS, drop_opaque_alpha, image_props, read_image
 
 _EXT = r"\.(?:png|jpe?g|tiff?|bmp)$"
 _HCI = re.compile(r"^input_Cam(\d+)" + _EXT, re.IGNORECASE)
@@ -338,7 +338,7 @@ def read_views(folder, *, scheme=None, pattern=None, index_base=None, grid=None,
                     f"all views must have the same bit depth"
                 )
             raw[i // U, i % U] = img
-    lf = to_float01(raw, folder, value_range=value_range)
+    lf = to_float01(drop_opaque_alpha(raw), folder, value_range=value_range)  # as a mosaic's
     meta = {
         "layout": {"rc": "views", "hci": "hci", "stanford": "stanford"}[scheme],
         "naming": scheme,
