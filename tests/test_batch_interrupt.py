@@ -107,6 +107,7 @@ def test_ctrl_c_stops_the_run_cleanly_and_a_rerun_completes_it(tmp_path, inputs)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err[-2000:]
     assert "interrupted" in err and "Traceback" not in err, err[-3000:]
+    assert "CancelledError" not in err and "still alive" not in err, err[-3000:]  # the shutdown's noise
     done = _check_complete_outputs(out, inputs)
     assert 1 <= done < 2 * N_PER_INPUT, (done, err[-3000:])
     _rerun_completes(glob, out, inputs)

@@ -18,19 +18,32 @@ class OneLineTracebacks(logging.Filter):
         return True
 
 
-def fold_dask_tracebacks() -> None:
-    """Fold the tracebacks that dask logs in this process (a lost scheduler, a killed worker) into one line.
+class CancelledRunNoise(logging.Filter):
+    """Drop what dask logs as a cancelled run's cluster closes: each cancelled task's ``CancelledError`` and
+    the nanny's "still alive ..., killing" for a worker busy with one (the run's own line says it stopped)."""
 
-    Adds :class:`OneLineTracebacks` to the handlers of the ``distributed``
-    logger (once); does nothing when dask.distributed is not installed.
+    NOISE = ("ended with CancelledError", "Worker process still alive after")
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not any(n in record.getMessage() for n in self.NOISE)
+
+
+def fold_dask_tracebacks() -> None:
+    """Fold the tracebacks that dask logs in this process (a lost scheduler, a killed worker) into one line,
+    and leave out the lines a cancelled run's shutdown logs.
+
+    Adds :class:`OneLineTracebacks` and :class:`CancelledRunNoise` to the
+    handlers of the ``distributed`` logger (once); does nothing when
+    dask.distributed is not installed.
     """
     try:
         import distributed  # noqa: F401  (its logging set-up gives the handlers to filter)
     except ImportError:
         return
     for h in logging.getLogger("distributed").handlers:
-        if not any(isinstance(f, OneLineTracebacks) for f in h.filters):
-            h.addFilter(OneLineTracebacks())
+        for kind in (OneLineTracebacks, CancelledRunNoise):
+            if not any(isinstance(f, kind) for f in h.filters):
+                h.addFilter(kind())
 
 
 def dask_setup(worker) -> None:
