@@ -289,3 +289,15 @@ def test_a_numba_that_fails_to_load_falls_back_with_a_warning(monkeypatch):
                                    blur_reference(lf, cp, 5, 0.5), atol=1e-5)
     finally:
         _fused._loops.cache_clear()
+
+
+def test_a_read_only_light_field_is_blurred_without_a_warning():
+    import warnings
+
+    lf = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
+    frozen = lf.copy()
+    frozen.setflags(write=False)  # as np.load(..., mmap_mode='r') gives
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # torch warned that the array is not writable
+        out = simulate_blur(frozen, [[-1.0, 0.0, 0.0], [1.0, 0.5, 0.0]], n_times=8)
+    np.testing.assert_array_equal(out, simulate_blur(lf, [[-1.0, 0.0, 0.0], [1.0, 0.5, 0.0]], n_times=8))

@@ -40,6 +40,20 @@ def test_a_path_found_on_a_window_blurs_the_frame_as_it_blurred_the_window(windo
         :, :, y0:y0 + h, x0:x0 + w]).max() > 1e-2 or window[2:] == (64, 72)  # the conversion mattered
 
 
+@pytest.mark.parametrize("window, frame, said", [
+    ((0, 0, 0, 0), (64, 64), "does not lie in a 64x64 frame"),  # was +-inf control points (or p_z set to 0)
+    ((200, 200, 16, 16), (64, 64), "does not lie in a 64x64 frame"),
+    ((0, 0, -8, 16), (64, 64), "does not lie"),
+    ((0, 0, 10), (64, 64), "window must be 4 whole numbers"),
+    ((0, 0, 16, 16), (0, 0), "does not lie in a 0x0 frame"),
+    ((0, 0, 16.5, 16), (64, 64), "window must be 4 whole numbers"),
+])
+def test_a_window_outside_its_frame_is_refused(window, frame, said):
+    for move in (path_in_frame, path_in_window):
+        with pytest.raises(ValueError, match=said):
+            move([[-0.5, 0.0, 0.4], [0.5, 0.0, -0.4]], window, frame)
+
+
 def test_the_whole_frame_as_window_leaves_the_path_unchanged():
     cp = np.array([[-0.7, 0.3, 0.9], [0.4, -0.5, -0.6]])
     np.testing.assert_allclose(path_in_frame(cp, (0, 0, 40, 50), (40, 50)), cp)

@@ -79,8 +79,10 @@ DEFAULT_BLOCK_ELEMENTS = {"cpu": 1 << 22, "cuda": 1 << 24}
 
 def to_tensor(lf, device=None, dtype=torch.float32) -> torch.Tensor:
     """Numpy ``(V, U, Y, X[, C])`` to a torch ``(V, U, Y, X, C)`` tensor (C = 1 for grayscale)."""
-    arr = validate_lightfield(lf)
-    t = torch.as_tensor(np.ascontiguousarray(arr), dtype=dtype, device=select_device(device))
+    arr = np.ascontiguousarray(validate_lightfield(lf))
+    if not arr.flags.writeable:  # torch shares a numpy array's memory, and warns when it is read-only
+        arr = arr.copy()
+    t = torch.as_tensor(arr, dtype=dtype, device=select_device(device))
     return t.unsqueeze(-1) if arr.ndim == 4 else t
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import operator
 import os
 from pathlib import Path
 
@@ -379,7 +380,7 @@ def path_in_frame(cp, window, frame_shape) -> np.ndarray:
     Raises
     ------
     ValueError
-        If ``cp`` holds a rotation.
+        If ``cp`` holds a rotation, or the window does not lie in the frame.
 
     Examples
     --------
@@ -483,8 +484,13 @@ def _translation_only(cp, move: str) -> np.ndarray:
 
 def _window_geometry(window, frame_shape):
     """``(rho, delta_y, delta_x)``: the window's ``R_w / R`` and its centre's ``(y~, x~)`` in the frame."""
-    y0, x0, h, w = window
-    Y, X = frame_shape
+    try:
+        (y0, x0, h, w), (Y, X) = ([operator.index(v) for v in t] for t in (window, frame_shape))
+    except (TypeError, ValueError):
+        raise ValueError(f"window must be 4 whole numbers (y0, x0, height, width) and frame_shape 2 (Y, X); got "
+                         f"{window!r} and {frame_shape!r}") from None
+    if min(h, w, Y, X) < 1 or min(y0, x0) < 0 or y0 + h > Y or x0 + w > X:
+        raise ValueError(f"the window {tuple(window)} does not lie in a {Y}x{X} frame")
     R, R_w = max(Y, X) / 2.0, max(h, w) / 2.0
     dy = (y0 + (h - 1) / 2.0 - (Y - 1) / 2.0) / R
     dx = (x0 + (w - 1) / 2.0 - (X - 1) / 2.0) / R
