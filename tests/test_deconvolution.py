@@ -693,6 +693,9 @@ def test_params_json_round_trip_and_overrides():
             with pytest.raises(TypeError, match=f"{field} must be true or false"):
                 DeconvolutionParams.from_dict({field: value})
     assert DeconvolutionParams(isotropic=np.bool_(True)).isotropic is True
+    for bad in ("1111", "2111", (1, 1, "2", 1), (1, 1, True, 1), (1, 1, 1)):  # a string was read per character
+        with pytest.raises(ValueError, match="axis_weights must be 4 non-negative numbers"):
+            DeconvolutionParams(axis_weights=bad)
     lf = np.random.default_rng(7).random((3, 3, 6, 6)).astype(np.float32)
     recs = []
     deconvolve(lf, linear_path(1.0, z=1.0), n_times=4, params=p, n_iter=2, tol=0.0, callback=recs.append)

@@ -203,8 +203,9 @@ class DeconvolutionParams(JsonParams):
         if tol < 0:
             raise ValueError(f"tol must be >= 0; got {tol}")
         object.__setattr__(self, "tol", tol)
-        try:
-            aw = tuple(float(a) for a in self.axis_weights)
+        try:  # numbers (a string's characters would each be read as one)
+            aw = () if isinstance(self.axis_weights, (str, bytes)) else tuple(
+                check_number(a, "axis_weights") for a in self.axis_weights)
         except (TypeError, ValueError):
             aw = ()
         if len(aw) != 4 or not all(math.isfinite(a) and a >= 0 for a in aw):
