@@ -610,6 +610,8 @@ def test_a_light_field_on_another_scale_is_refused_not_returned_unchanged():
     lf = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
     with pytest.raises(ValueError, match=r"reaches 255: blind deblurring takes values in \[0, 1\].*255 for 8-bit"):
         iter_blind_deblur(np.where(lf > 0.5, 255.0, lf * 255).astype(np.float32))  # refused before any work
+    with pytest.raises(ValueError, match=r"reaches 6\.55e\+04.*divide it by its white level \(65535 for uint16\)"):
+        iter_blind_deblur((lf * 65535).astype(np.uint16))  # was told to divide by 255
     lf[0, 0, 0, 0] = 1.2  # an overshoot of noise or a highlight is still on the [0, 1] scale
     iter_blind_deblur(lf).close()
 

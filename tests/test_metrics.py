@@ -55,6 +55,11 @@ def test_psnr_and_ssim_reject_bad_input():
         psnr(b, a)
     with pytest.raises(ValueError, match="6D"):
         psnr(np.zeros((1,) * 6), np.zeros((1,) * 6))
+    for metric in (psnr, ssim):  # a string was compared with 0 ('>' not supported)
+        with pytest.raises(TypeError, match="data_range must be a number; got '1'"):
+            metric(a, a + 0.1, data_range="1")
+        with pytest.raises(ValueError, match="data_range must be positive; got 0.0"):
+            metric(a, a + 0.1, data_range=0)
 
 
 # ------------------------------------------------------------------ SSIM

@@ -192,6 +192,7 @@ def test_presets():
     (lambda: random_path(1), "integer number >= 2 of control points; got 1"),
     (lambda: shake_path(z=-0.5), "z must be a finite number >= 0"),
     (lambda: preset_path("linear", extent=float("nan")), "the path's extent must be a finite number >= 0"),
+    (lambda: shake_path(seed=-1), "seed must be a whole number from 0 to 2\\*\\*63 - 1; got -1"),
 ])
 def test_path_generators_refuse_bad_sizes(make, message):
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")):

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-__all__ = ["check_int", "check_number", "check_infinity_disparity", "validate_lightfield", "brightest",
+__all__ = ["check_int", "check_number", "check_seed", "check_infinity_disparity", "validate_lightfield", "brightest",
            "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
 
 #: A light field whose :func:`brightest` value is below this is dark: the blind solver's salient-edge
@@ -19,6 +19,15 @@ BRIGHT_LIMIT = 2.0
 
 #: seeds are whole numbers from 0 to this (torch's generators take 64-bit signed seeds)
 MAX_SEED = 2**63 - 1
+
+
+def check_seed(seed, name: str = "seed") -> int:
+    """A seed: a whole number from 0 to :data:`MAX_SEED` (TypeError when not an integer, ValueError out of range)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer; got {seed!r}")
+    if not 0 <= seed <= MAX_SEED:
+        raise ValueError(f"{name} must be a whole number from 0 to 2**63 - 1; got {seed}")
+    return int(seed)
 
 
 def brightest(lf) -> float:

@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ._lightfield import check_number
 from .path import bezier_positions, validate_control_points, validate_n_times
 
 __all__ = [
@@ -100,12 +101,19 @@ def psnr(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> floa
         The PSNR over all views, pixels and channels; ``inf`` when they are equal.
     """
     est, ref = _pair(estimate, reference, crop)
-    if not data_range > 0:
-        raise ValueError(f"data_range must be positive; got {data_range!r}")
+    data_range = _data_range(data_range)
     mse = float(np.mean((est - ref) ** 2))
     if mse == 0.0:
         return float("inf")
     return float(10.0 * np.log10(float(data_range) ** 2 / mse))
+
+
+def _data_range(value) -> float:
+    """``data_range`` as a positive float (TypeError for a non-number, ValueError when not positive)."""
+    value = check_number(value, "data_range")
+    if not value > 0:
+        raise ValueError(f"data_range must be positive; got {value!r}")
+    return value
 
 
 def ssim(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> float:
@@ -144,7 +152,7 @@ def ssim(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> floa
     est = est.reshape(-1, est.shape[-2], est.shape[-1])
     ref = ref.reshape(-1, ref.shape[-2], ref.shape[-1])
     values = [
-        structural_similarity(e, r, data_range=float(data_range), win_size=win)
+        structural_similarity(e, r, data_range=_data_range(data_range), win_size=win)
         for e, r in zip(est, ref)
     ]
     return float(np.mean(values))

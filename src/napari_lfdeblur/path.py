@@ -30,6 +30,7 @@ from ._bezier import (
     elevate_degree,
     canonical_time_direction,
 )
+from ._lightfield import check_seed
 
 __all__ = [
     "MAX_ROTATION",
@@ -152,7 +153,7 @@ def random_path(
     if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
         raise ValueError(f"a Bezier path needs an integer number >= 2 of control points; got {n_points!r}")
     extent, z_extent = _number("extent", extent, 0.0), _number("z_extent", z_extent, 0.0)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(None if seed is None else check_seed(seed))
     cp = rng.uniform(-0.5, 0.5, size=(n_points, 3)) * np.array([extent, extent, z_extent])
     return center_path(cp)
 

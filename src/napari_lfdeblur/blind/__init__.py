@@ -96,7 +96,7 @@ import numpy as np
 import torch
 
 from .. import devices
-from .._lightfield import BRIGHT_LIMIT, MAX_SEED, brightest, check_number
+from .._lightfield import BRIGHT_LIMIT, brightest, check_number, check_seed
 from .._lightfield import check_infinity_disparity as _check_infinity_disparity
 from .._memory import release_host_memory
 from ..blur import validate_lightfield
@@ -268,10 +268,7 @@ def iter_blind_deblur(
     """
     arr, d_inf = _validate_input(blurred, infinity_disparity)
     p = _make_params(params, overrides)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise TypeError(f"seed must be an integer; got {seed!r}")
-    if not 0 <= seed <= MAX_SEED:
-        raise ValueError(f"seed must be a whole number from 0 to 2**63 - 1; got {seed}")
+    seed = check_seed(seed)
     windows = check_windows(windows, arr.shape, p)
     cap = check_max_memory(max_memory)
     if check_view_order:
@@ -304,8 +301,9 @@ def _validate_input(blurred, infinity_disparity):
     if Y < 4 or X < 4:
         raise ValueError(f"blind deblurring needs views of at least 4 x 4 pixels; got {Y} x {X}")
     if (top := float(arr.max())) > BRIGHT_LIMIT:
+        white = f"{np.iinfo(arr.dtype).max} for {arr.dtype}" if arr.dtype.kind in "iu" else "255 for 8-bit values"
         raise ValueError(f"the blurred light field reaches {top:.4g}: blind deblurring takes values in [0, 1] (its "
-                         "edge weights are on that scale); divide it by its white level (255 for 8-bit values)")
+                         f"edge weights are on that scale); divide it by its white level ({white})")
     d_inf = check_infinity_disparity(infinity_disparity, arr.shape)
     return arr, d_inf
 
