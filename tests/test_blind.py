@@ -1,6 +1,7 @@
 """Tests of blind deblurring (napari_lfdeblur.blind) at tiny sizes."""
 
 import json
+import sys
 import weakref
 
 import numpy as np
@@ -890,6 +891,22 @@ def test_plan_tiles_fits_the_budget():
         assert pad[0].start <= core[0].start and pad[0].stop >= core[0].stop
         assert pad[1].start <= core[1].start and pad[1].stop >= core[1].stop
     assert (cover == 1).all()
+
+
+def test_a_memory_warning_names_the_callers_line_and_does_not_claim_tiles_a_small_view_cannot_have():
+    import warnings
+
+    b = np.random.default_rng(0).random((3, 3, 24, 20)).astype(np.float32)
+    p = BlindParams.preset("default").replace(path={"n_outer": 1}, final={"n_iter": 2})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        blind_deblur(b, params=p, max_memory=1e5, device="cpu")
+        line = sys._getframe().f_lineno - 1
+        iter_blind_deblur(b, params=p, max_memory=1e5, device="cpu").close()
+    said = [w for w in caught if "more than max_memory" in str(w.message)]
+    assert [(w.filename, w.lineno) for w in said] == [(__file__, line), (__file__, line + 2)]  # not the library's
+    for w in said:  # 24x20 views are one tile (it said 'tiles of 24x20', 'on 128x128 windows')
+        assert "in one piece all the same" in str(w.message) and "on the whole view" in str(w.message)
 
 
 def test_short_memory_runs_in_overlapping_tiles(monkeypatch):

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+import os
+import sys
 
 import numpy as np
 
 __all__ = ["check_int", "check_number", "check_seed", "check_infinity_disparity", "validate_lightfield", "brightest",
-           "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
+           "caller_stacklevel", "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
 
 #: A light field whose :func:`brightest` value is below this is dark: the blind solver's salient-edge
 #: weight is absolute, and dark data (10- or 12-bit values in a 16-bit file, a linear decode) show it few edges.
@@ -28,6 +30,16 @@ def check_seed(seed, name: str = "seed") -> int:
     if not 0 <= seed <= MAX_SEED:
         raise ValueError(f"{name} must be a whole number from 0 to 2**63 - 1; got {seed}")
     return int(seed)
+
+
+def caller_stacklevel() -> int:
+    """The ``stacklevel`` with which the function calling this names, in a warning, the first caller outside
+    this package (a user's line, whichever of the package's functions it went through)."""
+    package = os.path.dirname(os.path.abspath(__file__))
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(package + os.sep):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def brightest(lf) -> float:

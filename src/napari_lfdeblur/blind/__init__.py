@@ -96,7 +96,7 @@ import numpy as np
 import torch
 
 from .. import devices
-from .._lightfield import BRIGHT_LIMIT, brightest, check_number, check_seed
+from .._lightfield import BRIGHT_LIMIT, brightest, caller_stacklevel, check_number, check_seed
 from .._lightfield import check_infinity_disparity as _check_infinity_disparity
 from .._memory import release_host_memory
 from ..blur import validate_lightfield
@@ -271,25 +271,25 @@ def iter_blind_deblur(
     seed = check_seed(seed)
     windows = check_windows(windows, arr.shape, p)
     cap = check_max_memory(max_memory)
+    level = caller_stacklevel()  # warnings name the user's line, through blind_deblur or not
     if check_view_order:
-        warn_if_transposed(arr, "the blurred light field", stacklevel=2)
+        warn_if_transposed(arr, "the blurred light field", stacklevel=level)
     asked = devices.select_device(device)
     need = estimate_blind_memory(arr.shape, p)
     available = within(devices.free_memory, cap)
     dev, tile = plan_run(arr.shape, p, asked, available)
     if dev != asked:
         warnings.warn(f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {asked} has free, even "
-                      "in tiles: running on the CPU instead", RuntimeWarning, stacklevel=2)
+                      "in tiles: running on the CPU instead", RuntimeWarning, stacklevel=level)
     if tile is not None:
-        where = ("the windows given" if windows else f"{p.path.region}x{p.path.region} windows" if p.path.region
+        Y, X, region = *arr.shape[2:4], p.path.region
+        where = ("the windows given" if windows else f"{region}x{region} windows" if region and max(Y, X) > region
                  else "the whole view")
         have = "max_memory" if cap is not None and available(dev) == cap else f"what {dev} has free"
-        warnings.warn(
-            f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {have}: restoring the light field in "
-            f"overlapping tiles of {tile[0]}x{tile[1]} (the path is estimated as usual, on {where})",
-            RuntimeWarning,
-            stacklevel=2,
-        )
+        how = (f"overlapping tiles of {tile[0]}x{tile[1]}" if tile[0] < Y or tile[1] < X
+               else "one piece all the same (a tile would be no smaller than its views)")
+        warnings.warn(f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {have}: restoring the light "
+                      f"field in {how} (the path is estimated as usual, on {where})", RuntimeWarning, stacklevel=level)
     return devices.run_with_cpu_fallback(lambda d: _run(arr, d_inf, p, d, int(seed), tile, windows), dev)
 
 
