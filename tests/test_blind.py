@@ -30,6 +30,7 @@ from napari_lfdeblur.deconvolution import DeconvolutionParams, deconvolve
 from napari_lfdeblur.path import bezier_positions, center_path, linear_path
 from napari_lfdeblur.priors import gradient_yx, sparse_gradient_prior
 from napari_lfdeblur.progress import run_to_completion, with_previews
+from napari_lfdeblur.samples import synthetic_scene
 
 from napari_lfdeblur.metrics import chamfer_distance, psnr
 
@@ -398,6 +399,26 @@ def _count_blur_calls(monkeypatch):
     return count
 
 
+def test_the_evidence_stage_reports_its_progress_through_the_agreement_check():
+    # little blur (0.6 views), noise: the agreement check runs its two estimates (most of a quick run's time)
+    lf, _ = synthetic_scene((5, 5, 48, 48), seed=0)
+    b = simulate_blur(lf, linear_path(0.6), n_times=16)
+    b = np.clip(b + np.random.default_rng(0).normal(0, 0.01, b.shape), 0, 1).astype(np.float32)
+    p = BlindParams.preset("default").replace(path={"n_outer": 1}, final={"n_iter": 5})
+    records = []
+    result = run_to_completion(iter_blind_deblur(b, params=p, device="cpu"), records.append)
+    assert np.isfinite(result.info["evidence"]["disagreement"])  # the check ran
+    fractions = [r.fraction for r in records]
+    assert fractions == sorted(fractions)
+    evidence = [r for r in records if r.stage.startswith("evidence")]
+    assert {r.stage for r in evidence} >= {"evidence (agreement check, part 1 of 2)",
+                                            "evidence (agreement check, part 2 of 2)"}
+    # its own share, between the path stages' and the final stage's, filled as the two estimates go
+    # (it stayed at the path stages' end, for the two estimates' whole time)
+    assert evidence[0].fraction == pytest.approx(2 / 4) and evidence[-1].fraction == pytest.approx(3 / 4)
+    assert len({round(r.fraction, 2) for r in evidence}) >= 10
+
+
 def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatch):
     lf = _scene((5, 5, 20, 20), seed=4)
     blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
@@ -411,10 +432,10 @@ def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatc
         last = count["n"]
         records.append(rec)
     total = count["n"]
-    # the path stage, then the evidence for its blur (at the start of the final stage)
+    # the path stage, then the evidence for its blur (a stage of its own, before the final one)
     n_path = sum(r.stage.startswith("path") for r in records)
     assert all(r.stage.startswith("path") for r in records[:n_path])
-    assert all(r.stage == "evidence" and r.fraction == pytest.approx(2 / 3) for r in records[n_path:])
+    assert all(r.stage == "evidence" and r.fraction == pytest.approx(2 / 4) for r in records[n_path:])
     assert max(work) <= 3  # also in the evidence stage
     records = records[:n_path]
     # the work is split finely: many records, none after more than a small part of it
@@ -427,12 +448,12 @@ def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatc
     for r in records:
         assert r.control_points.shape == (4, 3)
         assert np.all(np.isfinite(r.control_points))
-        # two path stages (in-plane, then p_z), then the final one
-        assert 1 <= r.iteration <= r.n_iterations and r.n_stages == 3 and r.stage_index in (0, 1)
+        # two path stages (in-plane, then p_z), then the evidence and the final one
+        assert 1 <= r.iteration <= r.n_iterations and r.n_stages == 4 and r.stage_index in (0, 1)
     keys = [(r.stage_index, r.iteration) for r in records]
     assert keys == sorted(keys) and len(set(keys)) == len(keys)
     fractions = [r.fraction for r in records]
-    assert fractions == sorted(fractions) and fractions[-1] <= 2 / 3 + 1e-9
+    assert fractions == sorted(fractions) and fractions[-1] <= 2 / 4 + 1e-9
     # every record can make a light-field estimate; with_previews(gen, every) makes one on every
     # every-th record, of the input's shape, in [0, 1]
     assert all(r.estimate is not None for r in records)

@@ -258,9 +258,10 @@ def iter_blind_deblur(
         (``info['phase'] == 'done'``) and NaN on the records inside one
         (``info['phase']`` ``'latent'`` or ``'path fit'``, with the current
         best fit in ``info['fit']``). Then records of stage ``'evidence'``
-        (one per conjugate-gradient iteration of the evidence test, at the
-        start of the final stage's share) and, when blur is found, of the
-        final stage.
+        (one per conjugate-gradient iteration of the evidence test; in the
+        agreement check, ``'evidence (agreement check, part i of 2)'``, those
+        of its two estimates, ``iteration`` counting thousandths of the
+        stage) and, when the light field is restored, of the final stage.
 
     Returns
     -------
@@ -426,8 +427,8 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path, info):
                             iteration=i * rec.n_iterations + rec.iteration, n_iterations=rec.n_iterations * len(parts),
                             loss=rec.loss,
                             control_points=cp,
-                            estimate=_tile_estimate(rec, out, core, inner), stage_index=n_path,
-                            n_stages=n_path + 1, info=rec.info)
+                            estimate=_tile_estimate(rec, out, core, inner), stage_index=n_path + 1,
+                            n_stages=n_path + 2, info=rec.info)  # after the path and the evidence stages
 
         res = yield from relay(gen, relabel)
         if tile is None:

@@ -97,7 +97,7 @@ class _Alternation:
         return Progress(
             stage=f"path ({kind} {stage + 1}/{n_stages}, {size})",
             iteration=it, n_iterations=self.stages[stage][2] * self.per_outer, loss=loss,
-            control_points=np.array(cur), estimate=estimate, stage_index=stage, n_stages=n_stages + 1,
+            control_points=np.array(cur), estimate=estimate, stage_index=stage, n_stages=n_stages + 2,
             info={"level": stage, "factor": fac, **extra},
         )
 

@@ -280,14 +280,17 @@ def iter_verdict(split, est, p: BlindParams, device, frame=None):
     """
     cp = center_path(est.control_points, p.n_times)
 
-    def report(_, stage="evidence", loss=float("nan"), path=cp):
-        # placed at the start of the final stage: the fraction done stays monotone
-        return Progress(stage=stage, iteration=0, n_iterations=1, loss=loss, control_points=path,
-                        stage_index=est.n_stages, n_stages=est.n_stages + 1)
+    def report(_, stage="evidence", loss=float("nan"), path=cp, done=0.0):
+        # a stage of its own, before the final one: the test takes the first tenth of it, the agreement
+        # check's two estimates the rest (when it runs; else the stage ends there)
+        return Progress(stage=stage, iteration=round(1000 * done), n_iterations=1000, loss=loss,
+                        control_points=path, stage_index=est.n_stages, n_stages=est.n_stages + 2)
 
-    def report_part(item):  # the agreement check's estimates, with their own path and fit
+    def report_part(item):  # the agreement check's estimates, with their own path, fit and progress
         i, rec = item
-        return report(None, f"evidence (agreement check, part {i + 1} of 2)", rec.loss, rec.control_points)
+        path_share = max(1, rec.n_stages - 2) / rec.n_stages  # its records count an evidence and a final stage
+        return report(None, f"evidence (agreement check, part {i + 1} of 2)", rec.loss, rec.control_points,
+                      0.1 + 0.45 * (i + min(1.0, rec.fraction / path_share)))
 
     evidence = yield from relay(blur_evidence(split[0][0], cp, p, device, frame), report)
     evidence.update(disagreement=float("nan"), agreement_paths=[])

@@ -58,6 +58,6 @@ def iter_joint(g: torch.Tensor, d_inf: float, p: BlindParams, device, rng, box: 
         history.append(float(loss.detach()))
         estimate = None if preview is None else (lambda: preview(L, 1))
         yield Progress(stage="path (joint)", iteration=it, n_iterations=jp.n_iter, loss=history[-1],
-                       control_points=pp.numpy(), estimate=estimate, stage_index=0, n_stages=2,
+                       control_points=pp.numpy(), estimate=estimate, stage_index=0, n_stages=3,
                        info={"prior_weight": w, "eps": eps})
     return PathEstimate(pp.numpy(), [1], 1, history, {})

@@ -132,7 +132,7 @@ class _Stage:
         self.r_px = max(frame_shape) / 2.0
         self.lam = evidence_weight(p)  # the alternation's smallest latent weight
         self.sigma = edge_sigmas(p.latent)
-        self.stage, self.n_stages = stage, stage + 2  # then the evidence and the final stage
+        self.stage, self.n_stages = stage, stage + 3  # then the evidence and the final stage
         rp = p.rotation
         fit = math.ceil(rp.steps / 10)
         cold = n_hqs_steps(self.lam, p.latent) * (p.latent.n_cg + 1) + fit  # the first alternation
