@@ -262,6 +262,16 @@ def test_bad_6dof_paths_get_clear_errors(cp, message):
         simulate_blur(_lf((3, 3, 8, 8)), cp)
 
 
+def test_a_torch_path_is_held_to_the_rotation_limit_too():
+    from napari_lfdeblur.blur import BlurOperator
+
+    bad = torch.tensor([[0, 0, 0, 0, 0.9, 0], [0, 0, 0, 0, 0, 0]], dtype=torch.float32)  # was accepted
+    with pytest.raises(ValueError, match="rotations must stay within 0.2 rad"):
+        BlurOperator((3, 3, 8, 8), bad, n_times=4, device="cpu")
+    edge = torch.tensor([[0, 0, 0, 0, 0.2, 0], [0, 0, 0, 0, -0.2, 0]], dtype=torch.float32)  # 0.2 in float32
+    assert BlurOperator((3, 3, 8, 8), edge, n_times=4, device="cpu").kind == "tiled"
+
+
 def test_limit_is_stated_in_radians():
     assert MAX_ROTATION == pytest.approx(0.2)
     ok = np.array([[0, 0, 0, 0, 0.2, 0], [0, 0, 0, 0, -0.2, 0]])

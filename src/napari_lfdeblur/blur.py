@@ -50,7 +50,7 @@ from .devices import select_device
 from ._taps import TapBlur, Taps, tap_kernel
 from ._taps4d import Taps4D, tap_kernel_4d
 from ._taps_tiled import TiledTaps, rotation_displacement, tile_side, tiled_kernel
-from .path import bezier_positions, has_rotation, validate_control_points, validate_n_times
+from .path import MAX_ROTATION, bezier_positions, has_rotation, validate_control_points, validate_n_times
 
 __all__ = [
     "BlurOperator",
@@ -310,6 +310,9 @@ class BlurOperator:
                 raise ValueError(f"control points must be (n, 3) or (n, 6); got {tuple(cp.shape)}")
             if not torch.isfinite(cp.detach()).all():
                 raise ValueError("control points contain NaN or Inf")
+            if cp.shape[1] == 6 and float(cp.detach()[:, 3:].abs().max()) > MAX_ROTATION * (1 + 1e-5):  # (rounding)
+                raise ValueError(f"rotations must stay within {MAX_ROTATION} rad, where the small-angle model holds; "
+                                 f"got {float(cp.detach()[:, 3:].abs().max()):.3g} rad")
         else:
             self.device = select_device(device)
             cp = torch.as_tensor(validate_control_points(control_points), dtype=dtype, device=self.device)

@@ -451,7 +451,8 @@ def deconvolve(
     params : DeconvolutionParams or dict, optional
         Solver parameters; single fields may also be given as keywords
         (``method=``, ``weight=``, ``n_iter=``, ``tol=``, ``isotropic=``,
-        ``axis_weights=``, ``angular=``, ``couple_channels=``, ``clip=``) and
+        ``axis_weights=``, ``angular=``, ``couple_channels=``, ``clip=``,
+        ``saturation=``) and
         override it.
     device : {'auto', 'cpu', 'cuda'}, default 'auto'
     init : ndarray, optional

@@ -290,7 +290,7 @@ def path_error(
     - the **Chamfer distance** compares the two sets of positions;
     - the **RMSE** compares positions at equal instants, for the better of
       the two time directions, also relative to the true path's extent;
-    - with ``lightfield`` given, the **blur mismatch** (docs/model.md, "Judging a path estimate")
+    - with ``lightfield`` given, the **blur mismatch** (docs/model.md, "Judging an estimate")
       ``||B(l, p_est) - B(l, p_true)|| / ||B(l, p_true) - l||`` compares the
       blurs the two centred paths produce on that (sharp) light field.
 

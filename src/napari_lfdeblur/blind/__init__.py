@@ -200,7 +200,7 @@ def blind_deblur(
     -------
     BlindResult
         ``.lightfield`` (input shape, float32), ``.control_points`` ((n, 3),
-        zero-mean gauge), ``.loss_history``, ``.params``, ``.timings``,
+        or (n, 6) with ``motion='6dof'``; zero-mean gauge), ``.loss_history``, ``.params``, ``.timings``,
         ``.info`` (with ``'blur_found'``, ``'evidence'``, ``'message'``).
 
     Raises
@@ -246,7 +246,10 @@ def iter_blind_deblur(
     Yields
     ------
     Progress
-        ``stage`` names the stage (``'path (level i/n, YxX)'``, ``'final'``),
+        ``stage`` names the stage (``'path (level i/n, YxX)'`` for a pyramid
+        level, ``'path (p_z i/n, ...)'`` for the stage that frees ``p_z``:
+        ``n`` counts them and, with ``motion='6dof'``, the ``'rotation
+        (YxX)'`` stage after them; ``'evidence'``, ``'final'``),
         ``control_points`` the current path (in every record). ``estimate()``
         computes the current light-field estimate (input shape, float32; in
         the path stage the grayscale latent, upsampled, placed in the full
