@@ -59,6 +59,12 @@ def test_widgets_open_from_the_plugin_menu(make_napari_viewer, display_name, cls
     if cls_name == "SimulateBlurWidget":
         widget.form.n_times.value = 4
         assert [layer.name for layer in widget.run_and_wait(timeout=30)] == ["lf blurred", "lf blurred path"]
+        # a second run updates its results in place, through the proxy too (its layers are new wrappers each
+        # time: they piled up as 'lf blurred [1]', 'lf blurred path [1]')
+        widget.form.n_times.value = 8
+        assert [layer.name for layer in widget.run_and_wait(timeout=30)] == ["lf blurred", "lf blurred path"]
+        assert [layer.name for layer in viewer.layers] == ["lf", "lf blurred", "lf blurred path"]
+        assert viewer.layers["lf blurred"].metadata["n_times"] == 8
 
 
 # ------------------------------------------------------------ simulate
@@ -473,21 +479,26 @@ def _blind_layer(viewer, lf):
     return add_layer(viewer, lightfield_layer_data(blurred, name="b", metadata=meta)), cp
 
 
-def _blind_dock(make_napari_viewer, lf):
+def _blind_dock(make_napari_viewer, lf, via_menu=False):
     """A viewer holding ``_blind_layer``'s blurred layer and a docked *Blind deblur* widget set to it:
-    ``(viewer, layer, true path, widget)``."""
+    ``(viewer, layer, true path, widget)``. ``via_menu``: opened as napari's plugin menu does (the widget
+    then gets a public-only proxy of the viewer)."""
     from napari_lfdeblur._napari.widgets.blind import BlindDeblurWidget
 
     viewer = make_napari_viewer()
     layer, cp = _blind_layer(viewer, lf)
-    w = _dock(viewer, BlindDeblurWidget(viewer))
+    if via_menu:
+        w = viewer.window.add_plugin_dock_widget("napari-lfdeblur", "Blind deblur")[1]
+    else:
+        w = _dock(viewer, BlindDeblurWidget(viewer))
     w.layer_combo.set_layer(layer)
     return viewer, layer, cp, w
 
 
-def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications):
+@pytest.mark.parametrize("via_menu", [False, True])
+def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications, via_menu):
     pytest.importorskip("napari_lfdeblur.blind")
-    viewer, layer, cp_true, w = _blind_dock(make_napari_viewer, lf)
+    viewer, layer, cp_true, w = _blind_dock(make_napari_viewer, lf, via_menu)
     before = layer.data.copy()
     assert w.form.true_path.current_choice == "b"  # the true path comes from the metadata
     w.form.n_control_points.value = 3
