@@ -425,6 +425,25 @@ def test_epi_layers_follow_the_pick(make_napari_viewer, lf):
     assert len(viewer.layers) == 3  # updated in place, not added again
 
 
+def test_epis_lie_beside_a_layer_placed_in_the_world(make_napari_viewer, lf):
+    from napari_lfdeblur._napari.widgets.epi import EpiPanel
+
+    viewer = make_napari_viewer()
+    plain = EpiPanel(viewer)
+    viewer.add_image(lf, name="a")
+    plain.layer_combo.set_layer("a")
+    pix = [(tuple(e.scale), tuple(e.translate)) for e in plain.show_epis()]  # the EPIs of an unplaced layer
+    viewer.add_image(lf, name="lf", scale=(1, 1, 2, 3), translate=(0, 0, 10, 20))
+    panel = EpiPanel(viewer)
+    panel.layer_combo.set_layer("lf")
+    for epi, (scale, translate) in zip(panel.show_epis(), pix):
+        # the same placement, taken through the layer's: it lay over the image (y 10-72), at x 0
+        np.testing.assert_allclose(epi.scale, np.multiply(scale, (2, 3)))
+        np.testing.assert_allclose(epi.translate, np.add((10, 20), np.multiply(translate, (2, 3))))
+    h = viewer.layers["lf EPI h"]
+    assert h.extent.world[0, 0] >= viewer.layers["lf"].extent.world[1, 2]  # below the light field
+
+
 def test_epis_follow_a_layer_whose_data_change(make_napari_viewer, lf):
     from napari_lfdeblur._napari.widgets.epi import EpiPanel
 
