@@ -549,6 +549,9 @@ def test_writer_never_overwrites_unless_asked(tmp_path, lf_gray):
     p = write_lightfield(tmp_path / "a.npz", lf_gray)
     with pytest.raises(FileExistsError, match="overwrite"):
         write_lightfield(p, lf_gray * 0.5)
+    write_lightfield(tmp_path / "b.npz", lf_gray, control_points=linear_path(1.0))
+    with pytest.raises(FileExistsError, match=r"b\.npz exists"):  # named, not its b.path.json
+        write_lightfield(tmp_path / "b.npz", lf_gray, control_points=linear_path(1.0))
     np.testing.assert_array_equal(read_lightfield(p), lf_gray)  # untouched
     write_lightfield(p, lf_gray * 0.5, overwrite=True)
     np.testing.assert_allclose(read_lightfield(p), lf_gray * 0.5)

@@ -384,6 +384,8 @@ def write_lightfield(
         for key in ("n_times", "infinity_disparity"):
             if fields.get(key) is not None:
                 check_path_field(key, fields[key], "the path")
+    if layout != "views":
+        check_writable(path, overwrite)  # the file itself first: its error names it, not its path file
     sidecar = sidecar_path_json(path, layout) if cp is not None else None
     owner = None
     if sidecar is not None and layout in _EMBEDS_PATH and not overwrite:
