@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from napari_lfdeblur.io import read_lightfield, read_lightfield_with_metadata, write_lightfield
+from napari_lfdeblur._napari.writer import LayerNotSaved
 
 LYTRO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lytro-f01-img0001"
 
@@ -140,7 +141,7 @@ def test_writer_functions(tmp_path, lf_rgb):
         np.testing.assert_array_equal(read_lightfield(written[0]), lf_rgb)
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "a.npz", "a.path.json", "b.path.json", "b.tif", "c.hdf5", "c.path.json"]
-    with pytest.raises(ValueError, match="4D"):
+    with pytest.raises(LayerNotSaved, match="4D"):
         write_npz(str(tmp_path / "d.npz"), lf_rgb[0, 0], {"name": "img"})
     with pytest.raises(FileExistsError):
         write_npz(str(tmp_path / "a.npz"), lf_rgb, {"name": "again"})
@@ -224,9 +225,9 @@ def test_path_writer(tmp_path):
     assert (fields["n_times"], fields["infinity_disparity"]) == (12, 1.5)
     with pytest.raises(FileExistsError):
         write_path_json(written, shapes, kw)
-    with pytest.raises(ValueError, match="'rect' holds no camera path"):
+    with pytest.raises(LayerNotSaved, match="'rect' holds no camera path"):
         write_path_json(str(tmp_path / "r.json"), [np.zeros((4, 2))], {"name": "rect", "metadata": {}})
-    with pytest.raises(ValueError, match="'odd': control points must be"):
+    with pytest.raises(LayerNotSaved, match="'odd': control points must be"):
         write_path_json(str(tmp_path / "o.json"), [], {"name": "odd", "metadata": {"control_points": [[0, 1]] * 3}})
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.json"]
 
@@ -253,3 +254,10 @@ def test_viewer_save_layer_with_plugin_writer(make_napari_viewer, tmp_path, lf_r
     np.testing.assert_array_equal(read_lightfield(out), lf_rgb[..., 1])
     viewer.layers.save(str(tmp_path / "saved.tif"), plugin="napari-lfdeblur")
     np.testing.assert_array_equal(read_lightfield(tmp_path / "saved.tif"), lf_rgb[..., 1])
+    # a layer the writer cannot take: napari shows the writer's reason (a ValueError it read as "not a
+    # valid writer" and dropped)
+    viewer.layers.clear()
+    viewer.add_image(np.zeros((4, 8, 8), np.float32), name="stack")
+    with pytest.raises(LayerNotSaved, match="'stack' has shape \\(4, 8, 8\\); only 4D"):
+        viewer.layers.save(str(tmp_path / "stack.npz"), plugin="napari-lfdeblur")
+    assert not (tmp_path / "stack.npz").exists()

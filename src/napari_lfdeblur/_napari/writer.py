@@ -14,6 +14,7 @@ An existing file is never replaced: save under a new name.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +23,26 @@ from ..io import PATH_FIELDS, write_lightfield
 from ..io._write import path_json_owner, sidecar_path_json
 from ..path import save_path_json
 
-__all__ = ["write_npz", "write_tiff", "write_h5", "write_layer", "write_path_json"]
+__all__ = ["write_npz", "write_tiff", "write_h5", "write_layer", "write_path_json", "LayerNotSaved"]
 
 
+class LayerNotSaved(RuntimeError):
+    """A layer this plugin's writer cannot save, and why. Not a ValueError: napari takes a writer's
+    ValueError for "no writer here" and says only that, dropping the reason."""
+
+
+def _says_why(write):
+    """The writer ``write``, whose ValueError and TypeError become :class:`LayerNotSaved` (napari shows it)."""
+    @functools.wraps(write)
+    def writer(*args, **kwargs):
+        try:
+            return write(*args, **kwargs)
+        except (ValueError, TypeError) as exc:
+            raise LayerNotSaved(str(exc)) from None
+    return writer
+
+
+@_says_why
 def write_layer(path: str, data, attributes: dict, suffix: str) -> list[str]:
     """Write one Image layer's light field to ``path`` (``suffix`` added if missing).
 
@@ -35,8 +53,9 @@ def write_layer(path: str, data, attributes: dict, suffix: str) -> list[str]:
 
     Raises
     ------
-    ValueError
-        If the layer is not a 4D (5D RGB) light field.
+    LayerNotSaved
+        If the layer is not a 4D (5D RGB) light field, or one
+        :func:`~napari_lfdeblur.io.write_lightfield` refuses (NaN, say).
     FileExistsError
         If ``path`` exists.
     """
@@ -76,6 +95,7 @@ def write_h5(path: str, data, attributes: dict) -> list[str]:
     return write_layer(path, data, attributes, ".h5")
 
 
+@_says_why
 def write_path_json(path: str, data, attributes: dict) -> list[str]:
     """npe2 writer: the camera path of a path layer to a path JSON file.
 
@@ -88,7 +108,7 @@ def write_path_json(path: str, data, attributes: dict) -> list[str]:
 
     Raises
     ------
-    ValueError
+    LayerNotSaved
         If the layer holds no valid camera path (``metadata['control_points']``).
     FileExistsError
         If the file exists.
