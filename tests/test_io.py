@@ -393,6 +393,13 @@ def test_a_mosaic_written_here_is_read_back_without_options(tmp_path, name, layo
     back, meta = read_lightfield_with_metadata(p)
     np.testing.assert_allclose(back, lf, atol=0.5 / 65535 + 1e-7)
     assert meta.get("angular_size", 4) == 4 and meta.get("grid", [4, 4]) == [4, 4]
+    # a statement that is not one (another tool's text under our key) is ignored, not an error
+    from napari_lfdeblur.io._png import write_png
+
+    for text in ("[4, 4]", '{"layout": "mosaic", "grid": [0, 4]}', "{not json"):
+        write_png(tmp_path / "odd.png", (lf[0, 0] * 255).astype(np.uint8), text={"lfdeblur_layout": text})
+        with pytest.raises(LightFieldFormatError, match="a single image is not a light field by itself"):
+            read_lightfield(tmp_path / "odd.png")
     # a plain image of the same size states nothing: still refused, with the options to pass
     plain = tmp_path / f"plain{Path(name).suffix}"
     iio.imwrite(plain, (lf[0, 0] * 255).astype(np.uint8))

@@ -65,6 +65,8 @@ __all__ = [
 LAYOUTS = ("views", "hci", "stanford", "eslf", "mosaic", "mat", "h5", "npy", "npz", "tiff")
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
+#: the first bytes of PNG, TIFF (both byte orders), JPEG and BMP files
+_IMAGE_MAGIC = (b"\x89PNG\r\n\x1a\n", b"II*\x00", b"MM\x00*", b"\xff\xd8\xff", b"BM")
 _SUFFIX_LAYOUT = {
     ".npy": "npy",
     ".npz": "npz",
@@ -207,7 +209,7 @@ def probe_layout(path) -> str | None:
         if layout == "eslf":  # an image file (PNG, TIFF, JPEG, BMP) by its first bytes
             with open(p, "rb") as fh:
                 head = fh.read(8)
-            return layout if head.startswith((b"\x89PNG\r\n\x1a\n", b"II*\x00", b"MM\x00*", b"\xff\xd8\xff", b"BM")) else None
+            return layout if head.startswith(_IMAGE_MAGIC) else None
         return layout
     except Exception:  # noqa: BLE001 - a probe never raises
         return None

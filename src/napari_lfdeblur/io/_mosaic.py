@@ -28,7 +28,8 @@ LAYOUT_KEY = "lfdeblur_layout"
 def mosaic_layout_text(layout: str, shape) -> str:
     """What a mosaic image of the light field ``shape`` states about its layout (JSON), as written."""
     V, U = (int(n) for n in shape[:2])
-    return json.dumps({"layout": "eslf", "angular_size": V} if layout == "eslf" else {"layout": "mosaic", "grid": [V, U]})
+    doc = {"layout": "eslf", "angular_size": V} if layout == "eslf" else {"layout": "mosaic", "grid": [V, U]}
+    return json.dumps(doc)
 
 
 def stated_layout(path) -> dict:
@@ -47,9 +48,11 @@ def stated_layout(path) -> dict:
         doc = json.loads(text) if text else {}
     except Exception:  # noqa: BLE001 - a statement that cannot be read is none
         return {}
-    if isinstance(doc, dict) and doc.get("layout") == "eslf" and isinstance(doc.get("angular_size"), int):
+    if not isinstance(doc, dict):
+        return {}
+    if doc.get("layout") == "eslf" and isinstance(doc.get("angular_size"), int) and doc["angular_size"] > 0:
         return doc
-    grid = doc.get("grid") if isinstance(doc, dict) else None
+    grid = doc.get("grid")
     if doc.get("layout") == "mosaic" and isinstance(grid, list) and len(grid) == 2 and all(
             isinstance(g, int) and g > 0 for g in grid):
         return doc
@@ -69,7 +72,6 @@ def detect_angular_size(height: int, width: int, path="mosaic") -> int:
         f"{path}: cannot tell the lenslet size of a {height}x{width} ESLF image "
         f"(candidates {cands or 'none'}); pass angular_size=A"
     )
-
 
 
 def read_eslf(path, *, angular_size=None, angular_crop=None, value_range=None, max_bytes=None):

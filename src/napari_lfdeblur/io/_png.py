@@ -84,7 +84,8 @@ def write_png(path, img: np.ndarray, *, level: int = 6, text: dict | None = None
     up[1:] -= raw[:-1]  # uint8 arithmetic wraps, as the filter wants
     data = np.concatenate([np.full((h, 1), 2, np.uint8), up], axis=1).tobytes()
     ihdr = struct.pack(">IIBBBBB", w, h, depth, ctype, 0, 0, 0)
-    texts = b"".join(_chunk(b"tEXt", k.encode("latin-1") + b"\0" + v.encode("latin-1")) for k, v in (text or {}).items())
+    texts = b"".join(_chunk(b"tEXt", k.encode("latin-1") + b"\0" + v.encode("latin-1"))
+                     for k, v in (text or {}).items())
     blob = (_SIGNATURE + _chunk(b"IHDR", ihdr) + texts + _chunk(b"IDAT", zlib.compress(data, level))
             + _chunk(b"IEND", b""))
     with open(path, "wb") as fh:
