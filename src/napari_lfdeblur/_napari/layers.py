@@ -436,10 +436,10 @@ def epi_layer_data(lf, which: str, *, name: str, v=None, u=None, y=None, x=None,
 _REPLACEABLE = weakref.WeakSet()
 
 
-def _made_here(layer) -> bool:
-    """Whether :func:`add_layer` made ``layer`` as a result. A widget opened from napari's plugin menu gets a
-    proxy of the viewer, which hands out a new wrapper of a layer each time: the layer itself is compared."""
-    return getattr(layer, "__wrapped__", layer) in _REPLACEABLE
+def _unwrapped(layer):
+    """The layer itself: a widget opened from napari's plugin menu gets a proxy of the viewer, which hands
+    out a new wrapper of a layer each time (a weak set of wrappers would lose them at once)."""
+    return getattr(layer, "__wrapped__", layer)
 
 
 def add_layer(viewer, layer_data, *, replace: bool = True):
@@ -454,7 +454,7 @@ def add_layer(viewer, layer_data, *, replace: bool = True):
     """
     data, kwargs, layer_type = layer_data
     name = kwargs.get("name")
-    previous = [layer for layer in viewer.layers if _made_here(layer) and _named(layer.name, name)]
+    previous = [layer for layer in viewer.layers if _unwrapped(layer) in _REPLACEABLE and _named(layer.name, name)]
     if replace and previous:
         layer = previous[0]
         if layer_kind(layer) == layer_type and _compatible(layer, data, kwargs):
@@ -474,7 +474,7 @@ def add_layer(viewer, layer_data, *, replace: bool = True):
         viewer.layers.remove(layer)
     layer = getattr(viewer, f"add_{layer_type}")(data, **kwargs)
     if replace:
-        _REPLACEABLE.add(getattr(layer, "__wrapped__", layer))
+        _REPLACEABLE.add(_unwrapped(layer))
     return layer
 
 
@@ -493,6 +493,6 @@ def _compatible(layer, data, kwargs) -> bool:
 def remove_layer(viewer, name: str) -> None:
     """Remove the layer that :func:`add_layer` (with ``replace``) made as ``name``, when there is one."""
     for layer in list(viewer.layers):
-        if _made_here(layer) and _named(layer.name, name):
+        if _unwrapped(layer) in _REPLACEABLE and _named(layer.name, name):
             viewer.layers.remove(layer)
             return
