@@ -9,6 +9,7 @@ independent tool too). Each bad-input case of issue 3 has its own test.
 from __future__ import annotations
 
 import json
+import re
 import warnings
 import struct
 import zlib
@@ -1110,3 +1111,15 @@ def test_an_opaque_alpha_channel_is_dropped_from_views_as_from_mosaics(tmp_path,
             np.testing.assert_array_equal(back, read_lightfield(write_lightfield(tmp_path / "rgb", lf_rgb)))
         else:  # transparency is data: kept
             assert back.shape[-1] == 4
+
+
+@pytest.mark.parametrize("suffix", [".h5", ".mat"])
+def test_a_crop_the_file_cannot_give_is_said_as_such_not_as_an_unreadable_file(tmp_path, lf_gray, suffix):
+    p = tmp_path / f"a{suffix}"
+    if suffix == ".h5":
+        write_lightfield(p, lf_gray)
+    else:
+        scipy.io.savemat(p, {"LF": lf_gray})
+    with pytest.raises(ValueError, match=rf"^{re.escape(str(p))}: angular_crop=99 must be n or \(n_v, n_u\)") as err:
+        read_lightfield(p, angular_crop=99)
+    assert not isinstance(err.value, LightFieldReadError)  # the file is readable: the request does not fit it

@@ -150,8 +150,10 @@ def central_views(V: int, U: int, angular_crop, path) -> tuple[slice, slice]:
 
     Raises
     ------
-    ValueError
-        When a size is not an integer between 1 and the grid's.
+    LightFieldFormatError
+        When a size is not an integer between 1 and the grid's (a
+        ValueError, and a :class:`LightFieldError`, which the readers'
+        :func:`names_the_file` passes on as it is: the file is readable).
     """
     try:
         n_v, n_u = (angular_crop, angular_crop) if np.ndim(angular_crop) == 0 else angular_crop
@@ -160,7 +162,7 @@ def central_views(V: int, U: int, angular_crop, path) -> tuple[slice, slice]:
     except (TypeError, ValueError):
         ok = False
     if not ok or not (1 <= n_v <= V and 1 <= n_u <= U):
-        raise ValueError(
+        raise LightFieldFormatError(
             f"{path}: angular_crop={angular_crop!r} must be n or (n_v, n_u) with 1 <= n_v <= {V} and "
             f"1 <= n_u <= {U} (the file has {V} x {U} views)"
         )
