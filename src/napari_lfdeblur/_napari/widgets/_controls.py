@@ -7,6 +7,7 @@
   Bezier control points;
 - :class:`PathSource`: take a path from another layer or a JSON file;
 - :func:`heading`: a section heading;
+- :func:`placed`: a result's layer data placed as its input layer lies in the world;
 - ``notify_*``: napari notifications.
 """
 
@@ -38,6 +39,7 @@ __all__ = [
     "heading",
     "is_image",
     "is_lightfield",
+    "placed",
     "notify_error",
     "notify_info",
     "notify_warning",
@@ -399,3 +401,16 @@ class PathSource(Container):
             notify_error(f"{self._title}: {exc}")
             return
         self._on_path(cp, {key: fields[key] for key in PATH_FIELDS if key in fields})
+
+
+def placed(layer_data, scale, translate):
+    """``layer_data`` placed in the world as a layer of ``scale`` and ``translate`` lies: the data's own
+    placement (in that layer's pixels: an EPI's beside it; none: over it) scaled by their last axes and moved
+    by their ``translate``. A 2D layer (shapes, an EPI) takes the last two axes."""
+    data, kwargs, kind = layer_data
+    ndim = 2 if kind == "shapes" else np.ndim(data) - (1 if kwargs.get("rgb") else 0)
+    scale, translate = np.asarray(scale, float)[-ndim:], np.asarray(translate, float)[-ndim:]
+    own_scale = np.asarray(kwargs.get("scale", np.ones(ndim)), float)
+    own_translate = np.asarray(kwargs.get("translate", np.zeros(ndim)), float)
+    kwargs = dict(kwargs, scale=tuple(own_scale * scale), translate=tuple(translate + own_translate * scale))
+    return data, kwargs, kind

@@ -29,7 +29,7 @@ from napari.qt.threading import thread_worker
 from ...progress import Cancelled, with_previews
 from .._torch_thread import iterate
 from ..layers import LayerError, add_layer, lightfield_from_layer
-from ._controls import LayerChoice, is_image, notify_error, notify_info, notify_warning
+from ._controls import LayerChoice, is_image, notify_error, notify_info, notify_warning, placed
 
 log = logging.getLogger(__name__)
 
@@ -149,6 +149,7 @@ class SolverWidget(Container):
     def __init__(self, napari_viewer):
         self.viewer = napari_viewer
         self.worker = None
+        self.input_placement = ((1.0,) * 4, (0.0,) * 4)  # (scale, translate) of the input layer of the last run
         self._gone = False  # the widget's Qt side was deleted (the viewer closed): signals update nothing
         self._cancelled = False
         self._cancel_event = threading.Event()
@@ -208,7 +209,7 @@ class SolverWidget(Container):
 
     def add_result(self, layer_data):
         """Add (or update) a layer of this run's results, placed over the input layer (:func:`add_layer`)."""
-        return add_layer(self.viewer, _placed(layer_data, **getattr(self, "input_placement", {})))
+        return add_layer(self.viewer, placed(layer_data, *self.input_placement))
 
     def run(self, *_):
         """Start the job in a worker thread (returns the worker, or None)."""
@@ -218,7 +219,7 @@ class SolverWidget(Container):
         picked = self.input_lightfield()
         if picked is None:
             return None
-        self.input_placement = {"scale": tuple(picked[0].scale), "translate": tuple(picked[0].translate)}
+        self.input_placement = (tuple(picked[0].scale), tuple(picked[0].translate))
         try:
             job = self.make_job(*picked)
         except (ValueError, LayerError) as exc:
@@ -342,17 +343,3 @@ class SolverWidget(Container):
         self.worker = None
         self.run_button.enabled = True
         self.cancel_button.enabled = False
-
-
-def _placed(layer_data, scale=None, translate=None):
-    """``layer_data`` placed as an input layer of ``scale`` and ``translate`` is (a 2D layer: their last two axes).
-
-    So that a result lies over its input whatever the input's placement.
-    """
-    data, kwargs, kind = layer_data
-    ndim = 2 if kind == "shapes" else np.ndim(data) - (1 if kwargs.get("rgb") else 0)
-    kwargs = dict(kwargs)
-    for key, value in (("scale", scale), ("translate", translate)):
-        if value is not None:
-            kwargs[key] = tuple(float(v) for v in value)[-ndim:]
-    return data, kwargs, kind

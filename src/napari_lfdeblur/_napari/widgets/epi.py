@@ -14,7 +14,7 @@ import numpy as np
 from magicgui.widgets import CheckBox, Container, PushButton
 
 from ..layers import LayerError, add_layer, epi_layer_data
-from ._controls import LayerChoice, heading, is_lightfield, notify_error, spin
+from ._controls import LayerChoice, heading, is_lightfield, notify_error, placed, spin
 
 __all__ = ["EpiPanel", "EpiWidget"]
 
@@ -114,10 +114,10 @@ class EpiPanel(Container):
             return None
         h_name, v_name = self.layer_names()
         meta = {"source_layer": layer.name}
-        h = add_layer(self._viewer, _beside(epi_layer_data(
-            lf, "h", name=h_name, v=self.v.value, y=self.y.value, metadata=meta), layer))
-        v = add_layer(self._viewer, _beside(epi_layer_data(
-            lf, "v", name=v_name, u=self.u.value, x=self.x.value, metadata=meta), layer))
+        h = add_layer(self._viewer, placed(epi_layer_data(
+            lf, "h", name=h_name, v=self.v.value, y=self.y.value, metadata=meta), layer.scale, layer.translate))
+        v = add_layer(self._viewer, placed(epi_layer_data(
+            lf, "v", name=v_name, u=self.u.value, x=self.x.value, metadata=meta), layer.scale, layer.translate))
         self._active = True
         return h, v
 
@@ -165,13 +165,3 @@ class EpiWidget(Container):
         self.epi = EpiPanel(napari_viewer)
         super().__init__(widgets=[self.epi], labels=False)
         self.native.layout().addStretch(1)
-
-
-def _beside(layer_data, layer):
-    """An EPI's layer data placed beside ``layer`` as it lies in the world: the EPI's own placement (in the
-    light field's pixels) scaled by the layer's last two axes' ``scale`` and moved by their ``translate``."""
-    data, kwargs, kind = layer_data
-    scale, translate = np.asarray(layer.scale[-2:], float), np.asarray(layer.translate[-2:], float)
-    kwargs = dict(kwargs, scale=tuple(np.asarray(kwargs.get("scale", (1, 1)), float) * scale),
-                  translate=tuple(translate + np.asarray(kwargs.get("translate", (0, 0)), float) * scale))
-    return data, kwargs, kind
