@@ -8,7 +8,6 @@ Light fields never travel between the client, the scheduler and the workers.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 import socket
@@ -230,14 +229,12 @@ def _check_path_file(spec: dict, out: Path) -> None:
 
     Its own names ``out`` (``lightfield``), or the manifest records an output of this item there.
     """
-    path_json = Path(spec["path_json"])
+    from ..io._write import path_json_names
+
+    path_json = Path(spec["path_json"])  # the path JSON beside ``out``
     if spec["overwrite"] or spec.get("recorded") or not path_json.exists():
         return
-    try:
-        doc = json.loads(path_json.read_text())
-    except (OSError, ValueError):
-        doc = None
-    if not (isinstance(doc, dict) and doc.get("lightfield") == out.name):
+    if not path_json_names(out):
         raise FileExistsError(f"{path_json} exists and is not this item's path file; pass overwrite=True "
                               "(command line: --overwrite) to replace it")
 

@@ -89,15 +89,29 @@ def path_json_owner(path) -> Path | None:
     names nothing, cannot be read, or the file it names is gone.
     """
     path = Path(path)
-    beside = path_json_beside(path)
-    try:
-        doc = json.loads(beside.read_text())
-    except (OSError, ValueError):
+    named = _stated_lightfield(path)
+    if named is None:
         return None
-    named = Path(str(doc.get("lightfield", path.name))) if isinstance(doc, dict) else Path(path.name)
-    if named.name != path.name and path_json_beside(named) == Path(beside.name) and (path.parent / named).exists():
+    named = Path(named)
+    if named.name != path.name and path_json_beside(named) == Path(path_json_beside(path).name) and (
+            path.parent / named).exists():
         return path.parent / named
     return None
+
+
+def path_json_names(path) -> bool:
+    """Whether ``<name>.path.json`` beside the file ``path`` is there and names ``path`` as its light field."""
+    return _stated_lightfield(Path(path)) == Path(path).name
+
+
+def _stated_lightfield(path: Path) -> str | None:
+    """The light field (``lightfield``) that ``<name>.path.json`` beside ``path`` states; None when it states
+    none or cannot be read."""
+    try:
+        doc = json.loads(path_json_beside(path).read_text())
+    except (OSError, ValueError):
+        return None
+    return str(doc["lightfield"]) if isinstance(doc, dict) and "lightfield" in doc else None
 
 
 def _layout_of(path: Path, layout: str | None) -> str:
@@ -394,7 +408,7 @@ def write_lightfield(
     if sidecar is not None and layout != "views":
         check_writable(sidecar, overwrite)
     pathless = cp is None and "control_points" not in meta  # (a path in metadata is kept in the file too)
-    if pathless and layout != "views" and not overwrite and _names_path(path):
+    if pathless and layout != "views" and not overwrite and path_json_names(path):
         raise FileExistsError(f"{path_json_beside(path)} exists and holds the camera path of an earlier {path.name}; "
                               "pass overwrite=True to replace it, or move it away")
 
@@ -422,15 +436,7 @@ def write_lightfield(
     elif owner is not None:
         warnings.warn(f"{path_json_beside(path).name} belongs to {owner.name} and was left as it is; the camera "
                       f"path of {path.name} is stored in the file itself", stacklevel=2)
-    elif pathless and overwrite and _names_path(path):  # what was replaced had a path: it is not this file's
+    elif pathless and overwrite and path_json_names(path):  # what was replaced had a path: it is not this file's
         path_json_beside(path).unlink()
     return path
 
-
-def _names_path(path: Path) -> bool:
-    """Whether ``<name>.path.json`` beside the file ``path`` is there and names ``path`` as its light field."""
-    try:
-        doc = json.loads(path_json_beside(path).read_text())
-    except (OSError, ValueError):
-        return False
-    return isinstance(doc, dict) and doc.get("lightfield") == path.name
