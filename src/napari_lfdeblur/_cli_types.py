@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from ._lightfield import MAX_SEED
+from ._lightfield import check_seed
 
 __all__ = ["angular_crop", "fraction", "gib", "seed", "value_range", "view_grid", "window"]
 
@@ -58,14 +58,11 @@ def view_grid(text: str) -> tuple:
 
 
 def seed(text: str) -> int:
-    """``--seed``: a whole number from 0 to :data:`~napari_lfdeblur._lightfield.MAX_SEED`."""
+    """``--seed``: a whole number from 0 to :data:`~napari_lfdeblur._lightfield.MAX_SEED` (:func:`check_seed`)."""
     try:
-        value = int(text)
+        return check_seed(int(text))
     except ValueError:
-        value = -1
-    if not 0 <= value <= MAX_SEED:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number from 0 to 2**63 - 1")
-    return value
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number from 0 to 2**63 - 1") from None
 
 
 def value_range(text: str):

@@ -162,14 +162,14 @@ def view_shifts(lf, *, validate: bool = True) -> np.ndarray:
     array([[0., 2.],
            [2., 0.]])
     """
+    return _view_motion(lf, validate, "view_shifts")[0]
+
+
+def _view_motion(lf, validate: bool, caller: str) -> tuple[np.ndarray, float]:
+    """:func:`view_shifts` of ``lf``, and the least correlation of a registered view pair."""
     arr = validate_lightfield(lf) if validate else np.asarray(lf)
     if not shifts_measurable(arr.shape):
-        raise ValueError(f"view_shifts needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
-    return _view_motion(arr)[0]
-
-
-def _view_motion(arr: np.ndarray) -> tuple[np.ndarray, float]:
-    """:func:`view_shifts` of a checked light field, and the least correlation of a registered view pair."""
+        raise ValueError(f"{caller} needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
     V, U = arr.shape[:2]
     cv, cu = (V - 1) // 2, (U - 1) // 2
     ref = _gray_view(arr, cv, cu)
@@ -220,10 +220,7 @@ def views_transposed(lf, min_shift: float = 0.1) -> bool | None:
         shifted copies of each other (registered, a pair correlates by less
         than :data:`MIN_VIEW_CORRELATION`: noise, unrelated images).
     """
-    arr = validate_lightfield(lf)
-    if not shifts_measurable(arr.shape):
-        raise ValueError(f"views_transposed needs at least 2 x 2 views of 8 x 8 px; got shape {arr.shape}")
-    shifts, agreement = _view_motion(arr)
+    shifts, agreement = _view_motion(lf, True, "views_transposed")
     return transposed_from_shifts(shifts, min_shift) if agreement >= MIN_VIEW_CORRELATION else None
 
 
@@ -272,7 +269,7 @@ def warn_if_transposed(lf, source: str, *, fix: str = "", stacklevel: int = 2) -
     """
     if not shifts_measurable(lf.shape):
         return None
-    shifts, agreement = _view_motion(np.asarray(lf))
+    shifts, agreement = _view_motion(lf, False, "warn_if_transposed")
     if agreement >= MIN_VIEW_CORRELATION and transposed_from_shifts(shifts):
         warning = ViewOrderWarning(
             f"{source}: the views look transposed: stepping through u moves the image along y by "
