@@ -415,7 +415,7 @@ def test_the_evidence_stage_reports_its_progress_through_the_agreement_check():
                                             "evidence (agreement check, part 2 of 2)"}
     # its own share, between the path stages' and the final stage's, filled as the two estimates go
     # (it stayed at the path stages' end, for the two estimates' whole time)
-    assert evidence[0].fraction == pytest.approx(2 / 4) and evidence[-1].fraction == pytest.approx(3 / 4)
+    assert evidence[0].fraction == pytest.approx(2 / 4, abs=1e-3) and evidence[-1].fraction == pytest.approx(3 / 4)
     assert len({round(r.fraction, 2) for r in evidence}) >= 10
 
 
@@ -435,7 +435,9 @@ def test_path_stage_reports_often_with_monotone_progress_and_previews(monkeypatc
     # the path stage, then the evidence for its blur (a stage of its own, before the final one)
     n_path = sum(r.stage.startswith("path") for r in records)
     assert all(r.stage.startswith("path") for r in records[:n_path])
-    assert all(r.stage == "evidence" and r.fraction == pytest.approx(2 / 4) for r in records[n_path:])
+    evidence = [r.fraction for r in records[n_path:]]  # the evidence test fills the first tenth of its stage
+    assert all(r.stage == "evidence" for r in records[n_path:]) and evidence == sorted(evidence)
+    assert 2 / 4 < evidence[0] < evidence[-1] <= (2 + 0.1) / 4 + 1e-9
     assert max(work) <= 3  # also in the evidence stage
     records = records[:n_path]
     # the work is split finely: many records, none after more than a small part of it
@@ -625,6 +627,10 @@ def test_bad_input_gives_clear_errors():
         PathFitParams(disparity_weight=-1.0)
     with pytest.raises(ValueError, match="rotation.warm_hqs_steps"):
         BlindParams().replace(rotation={"warm_hqs_steps": -1})
+    # a zero weight divided by zero mid-run (l0_floor=0: after the whole path stage); a floor above 1 grew it
+    for bad in ({"l0_weight": 0.0}, {"l0_floor": 0.0}, {"l0_floor": 2.0}):
+        with pytest.raises(ValueError, match=f"latent.{next(iter(bad))}"):
+            BlindParams().replace(latent=bad)
 
 
 def test_a_light_field_on_another_scale_is_refused_not_returned_unchanged():
@@ -634,8 +640,31 @@ def test_a_light_field_on_another_scale_is_refused_not_returned_unchanged():
         iter_blind_deblur(np.where(lf > 0.5, 255.0, lf * 255).astype(np.float32))  # refused before any work
     with pytest.raises(ValueError, match=r"reaches 6\.55e\+04.*divide it by its white level \(65535 for uint16\)"):
         iter_blind_deblur((lf * 65535).astype(np.uint16))  # was told to divide by 255
+    with pytest.raises(ValueError, match="reaches 2:"):  # 'values reaching 2' are refused
+        iter_blind_deblur(np.where(lf > 0.5, 2.0, lf).astype(np.float32))
     lf[0, 0, 0, 0] = 1.2  # an overshoot of noise or a highlight is still on the [0, 1] scale
     iter_blind_deblur(lf).close()
+
+
+def test_final_none_and_odd_inputs_report_what_happened(linear_case):
+    _, cp, blurred = linear_case
+    small = np.ascontiguousarray(blurred[:, :, :24, :24])
+    quick = BlindParams().replace(path=dict(n_outer=1, steps=30, n_random=20, n_random_later=10), final={"n_iter": 3})
+    # no final stage: the input comes back, and the result says that it was not restored
+    res = blind_deblur(small, params=quick.replace(final=None, require_evidence=False), device="cpu")
+    np.testing.assert_array_equal(res.lightfield, small)
+    assert res.info["restoration"] == "none" and "final=None" in res.info["message"]
+    assert np.abs(res.control_points).max() > 0  # the path estimated stands
+    # a bool light field is data in {0, 1} (it failed inside numpy after the path stage)
+    res = blind_deblur(small > 0.5, params=quick, device="cpu")
+    assert res.lightfield.dtype == np.float32 and np.isfinite(res.lightfield).all()
+    # a black one: no motion shows, so no agreement check runs, and the message says black
+    res = blind_deblur(np.zeros_like(small), params=quick, device="cpu")
+    assert res.info["evidence"]["reach"] == 0.0 and np.isnan(res.info["evidence"]["disagreement"])
+    assert res.info["message"].endswith("The light field is black") and res.info["restoration"] == "none"
+    # the evidence stage's records count from 1 and move (they stood at 0)
+    its = [r.iteration for r in iter_blind_deblur(small, params=quick, device="cpu") if r.stage == "evidence"]
+    assert its and min(its) >= 1 and its == sorted(its) and its[-1] > its[0]
 
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf"), 4.5, -4.01])
@@ -1094,7 +1123,8 @@ def test_windows_name_where_the_path_is_estimated():
     # windows the solver cannot take: clear errors before any work
     for bad, said in (([], "non-empty"), ([(0, 0, 40)], "non-empty list of"), ([(0, 0, 40.5, 40)], "whole numbers"), ((0, 0, 40, 40), "a list of"),
                       ([(0, 0, 8, 40)], "smaller than 16 x 16"), ([(0, 50, 40, 40)], "reaches outside the 40 x 80"),
-                      ([(-1, 0, 30, 30)], "reaches outside")):
+                      ([(-1, 0, 30, 30)], "reaches outside"), ([(0, 0, 40, 40)] * 2, "overlap"),
+                      ([(0, 0, 40, 40), (0, 20, 40, 40)], "overlap")):
         with pytest.raises(ValueError, match=said):
             blind_deblur(blurred, params=p, device="cpu", windows=bad)
     with pytest.raises(ValueError, match="one window"):

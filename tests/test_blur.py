@@ -237,6 +237,8 @@ def test_a_tile_with_its_frame_blurs_like_the_full_light_field(d_inf):
                                atol=1e-5)
     with pytest.raises(ValueError, match="does not fit"):
         BlurOperator((5, 5, h, w), cp, device="cpu", frame=(20, 0, 30, 40))
+    with pytest.raises(ValueError, match="whole numbers"):  # was truncated to (1, 0, 30, 40)
+        BlurOperator((5, 5, h, w), cp, device="cpu", frame=(1.7, 0.9, 30, 40))
 
 
 @pytest.mark.parametrize("d_inf", [0.0, 4.0])

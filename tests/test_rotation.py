@@ -417,7 +417,7 @@ def test_rotation_stage_stops_when_the_fit_stalls_or_the_path_settles():
     assert fits == [3] * 3 and len(info["rotation_fit"]) == 3
     latent = BlindParams().latent
     per_step = latent.n_cg + 1
-    cold = n_hqs_steps(latent.l0_weight * min(1.0, latent.l0_floor), latent) * per_step
+    cold = n_hqs_steps(latent.l0_weight * latent.l0_floor, latent) * per_step
     assert cold > 2 * per_step and latents == [cold] + [2 * per_step] * 2
     # a fit that must fall by 100 % per 10 steps stalls at its first record (the first check compares
     # step 10 with step 1)

@@ -283,6 +283,12 @@ def test_elevate_degree_cannot_lower_the_degree():
 
     with pytest.raises(ValueError, match="lower"):
         elevate_degree(np.zeros((4, 3)), 3)
+    # checked as every path is (an (n, 2) array became 3 points; 3.5 gave 4; True was a count)
+    with pytest.raises(ValueError, match=r"\(n, 3\)"):
+        elevate_degree(np.zeros((2, 2)), 3)
+    for bad in (3.5, True):
+        with pytest.raises(TypeError, match="n_points"):
+            elevate_degree(np.zeros((2, 3)), bad)
 
 
 def test_path_json_round_trip_and_no_overwrite(tmp_path):

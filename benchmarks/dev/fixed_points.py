@@ -54,7 +54,7 @@ def main(argv=None):
     from napari_lfdeblur.progress import run_to_completion
 
     p = BlindParams.preset("default")
-    lam = p.latent.l0_weight * min(1.0, p.latent.l0_floor)
+    lam = p.latent.l0_weight * p.latent.l0_floor
     sigma = edge_sigmas(p.latent)
     names = ("true", "estimate", "zero")
     print("case | mismatch | gain dB restored anyway | latent under | fit of: " + " / ".join(names)

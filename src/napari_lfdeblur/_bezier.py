@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from ._lightfield import check_int
+
 __all__ = [
     "MAX_ROTATION",
     "validate_control_points",
@@ -179,10 +181,14 @@ def elevate_degree(control_points, n_points: int) -> np.ndarray:
 
     Raises
     ------
+    TypeError
+        If ``n_points`` is not an integer.
     ValueError
-        If ``n_points < n`` (a degree cannot be lowered exactly).
+        If the control points are not valid (:func:`validate_control_points`)
+        or ``n_points < n`` (a degree cannot be lowered exactly).
     """
-    cp = np.asarray(control_points, dtype=np.float64)
+    cp = validate_control_points(control_points)
+    n_points = check_int(n_points, "n_points")
     if n_points < len(cp):
         raise ValueError(f"cannot lower a Bezier curve's degree: {len(cp)} -> {n_points} control points")
     while len(cp) < n_points:

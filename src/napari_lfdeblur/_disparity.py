@@ -14,7 +14,8 @@ import torch
 from . import _fused
 from .blur import lerp_taps
 
-__all__ = ["gray", "shear_taps", "shear", "downsample", "disparity_map"]
+__all__ = ["gray", "shear_taps", "shear", "downsample", "disparity_map", "scene_disparity", "DISPARITY_STEP",
+           "DISPARITY_REACH"]
 
 
 def gray(f: torch.Tensor) -> torch.Tensor:
@@ -110,3 +111,22 @@ def disparity_map(f: torch.Tensor, d_max: float = 2.5, n: int = 41, smooth: int 
         best = torch.where(better, var, best)
         arg = arg.masked_fill(better, float(d))
     return arg.cpu().numpy()
+
+
+#: the spacing (px/view) of the shears :func:`scene_disparity` tries
+DISPARITY_STEP = 0.125
+#: the disparities :func:`scene_disparity` tries reach this far (px/view) beyond ``|d_inf|``
+DISPARITY_REACH = 2.5
+
+
+def scene_disparity(f: torch.Tensor, infinity_disparity: float = 0.0) -> np.ndarray:
+    """The per-pixel disparity (px/view) of ``f`` (V, U, Y, X, C) that the TV's angular differences follow.
+
+    Among the shears ``|d| <= DISPARITY_REACH + |d_inf|`` in steps of
+    ``DISPARITY_STEP``, the one that makes the views of the grayscale agree
+    best at each pixel (box-smoothed variance over the views). Returns
+    float32 of shape (Y, X).
+    """
+    reach = DISPARITY_REACH + abs(float(infinity_disparity))
+    n = 2 * int(math.ceil(reach / DISPARITY_STEP)) + 1
+    return disparity_map(gray(f), d_max=DISPARITY_STEP * (n // 2), n=n)

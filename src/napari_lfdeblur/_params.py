@@ -16,7 +16,7 @@ from dataclasses import MISSING, asdict, fields
 
 import numpy as np
 
-__all__ = ["JsonParams", "check_int", "check_float", "check_bool"]
+__all__ = ["JsonParams", "check_int", "check_float", "check_bool", "check_fields"]
 
 
 class JsonParams:
@@ -176,3 +176,20 @@ def check_bool(obj, name: str, label: str) -> None:
     if not isinstance(v, (bool, np.bool_)):
         raise TypeError(f"{label} must be true or false; got {v!r}")
     object.__setattr__(obj, name, bool(v))
+
+
+def check_fields(obj, prefix: str, ints=None, nonneg=(), positive=(), signed=(), unit=(), bools=()) -> None:
+    """Check the fields of a parameter dataclass (see :func:`check_int`, :func:`check_float`).
+
+    ``unit`` fields must be in (0, 1] (they are also in ``positive``).
+    """
+    for name, lo in (ints or {}).items():
+        check_int(obj, name, lo, f"{prefix}.{name}")
+    for kind, names in (("nonneg", nonneg), ("positive", positive), ("signed", signed)):
+        for name in names:
+            check_float(obj, name, kind, f"{prefix}.{name}")
+    for name in unit:
+        if getattr(obj, name) > 1:
+            raise ValueError(f"{prefix}.{name} must be in (0, 1]; got {getattr(obj, name)}")
+    for name in bools:
+        check_bool(obj, name, f"{prefix}.{name}")

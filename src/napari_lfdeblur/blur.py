@@ -41,6 +41,8 @@ over the whole view; its 4D kernels are built and applied per spatial tile
 
 from __future__ import annotations
 
+import operator
+
 import numpy as np
 import torch
 
@@ -104,9 +106,9 @@ def validate_frame(frame, shape):
     if frame is None:
         return None
     try:
-        y0, x0, Yf, Xf = (int(v) for v in frame)
+        y0, x0, Yf, Xf = (operator.index(v) for v in frame)
     except (TypeError, ValueError):
-        raise ValueError(f"frame must be (y0, x0, Y_full, X_full); got {frame!r}") from None
+        raise ValueError(f"frame must be (y0, x0, Y_full, X_full), whole numbers; got {frame!r}") from None
     Y, X = shape[2], shape[3]
     if y0 < 0 or x0 < 0 or y0 + Y > Yf or x0 + X > Xf:
         raise ValueError(f"a {Y}x{X} tile at ({y0}, {x0}) does not fit in a {Yf}x{Xf} frame")

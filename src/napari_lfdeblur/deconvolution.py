@@ -76,7 +76,7 @@ from .devices import select_device
 from .path import has_rotation, validate_control_points, validate_n_times
 from .special_cases import inplane_matrix, solve_inplane
 from ._noise import estimate_noise_sigma
-from ._disparity import disparity_map, gray
+from ._disparity import scene_disparity
 from ._oriented import OrientedDifferences
 from ._tv_solvers import iter_fista_tv
 
@@ -165,9 +165,12 @@ class DeconvolutionParams(JsonParams):
         its own TV, in about a third of the memory; it suits channels whose
         edges are unrelated.
     clip : bool
-        Constrain the estimate to [0, 1] when the input lies in [0, 1].
+        Constrain the estimate to [0, 1] when the input lies in [0, 1]
+        (integer input: to [0, its dtype's largest value] when it lies
+        there). ``'inplane'``, a linear solve, clips its result instead.
     saturation : bool
-        With ``clip``, samples of the input at 1, the top of the range, are
+        ``'tv'`` only. With ``clip``, samples of the input at 1 (integer
+        input: at its dtype's largest value), the top of the range, are
         taken as clipped by the sensor: they say only that the light reached
         at least 1. The data term then asks the blur of the estimate to
         reach 1 there, not to equal it (a censored fit), the estimate may
@@ -238,12 +241,16 @@ class DeconvolutionParams(JsonParams):
             ``NOISE_WEIGHT_FACTOR * sigma``; times ``ANISOTROPIC_WEIGHT_SCALE``
             for the anisotropic TV.
         """
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r}: choose one of {', '.join(METHODS)}")
         if self.weight is not None:
             return self.weight
         if method == "inplane":
             return INPLANE_WEIGHT
         if sigma is None:
             raise ValueError("the noise rule of the 'tv' weight needs sigma (see estimate_noise_sigma)")
+        if not check_number(sigma, "sigma") >= 0:
+            raise ValueError(f"sigma must be >= 0; got {sigma}")
         colour = self.couple_channels and n_channels > 1
         scale = 1.0 if self.isotropic else ANISOTROPIC_WEIGHT_SCALE
         return scale * (COLOUR_WEIGHT_FACTOR if colour else NOISE_WEIGHT_FACTOR) * float(sigma)
@@ -277,7 +284,7 @@ def _channel_groups(params: DeconvolutionParams, C: int) -> list[slice]:
 
 
 def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: DeconvolutionParams, weight, sigma,
-             out: np.ndarray, oriented=None):
+             out: np.ndarray, oriented=None, white: float = 1.0):
     """FISTA with a warm-started TV prox for ``1/2 ||K x - f||^2 + w TV4(x)`` (+ box); yields Progress.
 
     Without ``couple_channels`` the channels are independent, so they are
@@ -286,11 +293,12 @@ def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: Deconv
     ``f``, ``x0``: (V, U, Y, X, C); each group's result is written into
     ``out`` (the input's numpy shape), which is returned. ``oriented``: the
     angular differences along the disparity (None: along the view axes).
+    ``white``: the top of the input's range (:func:`_white_level`).
     """
     box, saturated = None, False
-    if params.clip and float(f.min()) >= 0.0 and float(f.max()) <= 1.0:
-        saturated = params.saturation and float(f.max()) >= 1.0
-        box = (0.0, None) if saturated else (0.0, 1.0)  # saturated: clipped to [0, 1] once solved
+    if params.clip and float(f.min()) >= 0.0 and float(f.max()) <= white:
+        saturated = params.saturation and float(f.max()) >= white
+        box = (0.0, None) if saturated else (0.0, white)  # saturated: clipped to [0, white] once solved
     C = f.shape[-1]
     view = out if out.ndim == 5 else out[..., None]
     groups = _channel_groups(params, C)
@@ -299,7 +307,7 @@ def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: Deconv
             def estimate():
                 full = out.copy()
                 part = from_tensor(x, 5)
-                (full if full.ndim == 5 else full[..., None])[..., cs] = part.clip(0.0, 1.0) if saturated else part
+                (full if full.ndim == 5 else full[..., None])[..., cs] = part.clip(0.0, white) if saturated else part
                 return full
 
             return Progress(stage="tv", iteration=g * params.n_iter + it, n_iterations=len(groups) * params.n_iter,
@@ -311,8 +319,8 @@ def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: Deconv
         x = yield from iter_fista_tv(op, fc, x0c, weight=weight, n_iter=params.n_iter, tol=params.tol,
                                      isotropic=params.isotropic, axis_weights=params.axis_weights, box=box,
                                      n_inner=N_INNER, record=record, coupled=params.couple_channels,
-                                     ceiling=1.0 if saturated else None, oriented=oriented)
-        view[..., cs] = from_tensor(x.clamp_(0.0, 1.0) if saturated else x, 5)
+                                     ceiling=white if saturated else None, oriented=oriented)
+        view[..., cs] = from_tensor(x.clamp_(0.0, white) if saturated else x, 5)
         del x
     return out
 
@@ -378,17 +386,27 @@ def iter_deconvolve(
     dev = select_device(device)
     frame = validate_frame(frame, arr.shape)
     check_infinity_disparity(d_inf, arr.shape if frame is None else (*arr.shape[:2], *frame[2:]))  # whole views
+    if method == "tv" and p.weight is None and min(arr.shape[2:4]) < 2:
+        raise ValueError(f"views of {arr.shape[2]} x {arr.shape[3]} px are too small to estimate the noise the "
+                         "default weight follows (2 x 2 at least): pass weight=")
     return _run(arr, cp, n_times, d_inf, p, method, dev, init, frame)
+
+
+def _white_level(arr: np.ndarray) -> float:
+    """The top of a light field's range: its dtype's largest value for integers, else 1."""
+    return float(np.iinfo(arr.dtype).max) if arr.dtype.kind in "iu" else 1.0
 
 
 def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
     sigma = estimate_noise_sigma(arr) if method == "tv" and p.weight is None else None  # for the weight rule
     weight = p.effective_weight(method, sigma, arr.shape[4] if arr.ndim == 5 else 1)
-    f = to_tensor(arr, device=dev)
+    f, white = to_tensor(arr, device=dev), _white_level(arr)
     if method == "inplane":
         M = inplane_matrix(cp, arr.shape[0], arr.shape[1], n_times=n_times)
         with torch.no_grad():
             x = solve_inplane(f, M, weight)
+            if p.clip and float(f.min()) >= 0.0 and float(f.max()) <= white:
+                x.clamp_(0.0, white)
         out = from_tensor(x, arr.ndim)
         yield Progress(stage="inplane", iteration=1, n_iterations=1, info={"weight": weight, "method": method},
                        estimate=out.copy)
@@ -400,26 +418,8 @@ def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
     oriented = None
     if p.angular == "disparity" and max(f.shape[:2]) > 1:
         oriented = OrientedDifferences(torch.as_tensor(scene_disparity(f, d_inf), device=dev))
-    return (yield from _iter_tv(op, f, x0, p, weight, sigma, np.empty(arr.shape, np.float32), oriented))
-
-
-#: the spacing (px/view) of the shears :func:`scene_disparity` tries
-DISPARITY_STEP = 0.125
-#: the disparities :func:`scene_disparity` tries reach this far (px/view) beyond ``|d_inf|``
-DISPARITY_REACH = 2.5
-
-
-def scene_disparity(f: torch.Tensor, infinity_disparity: float = 0.0) -> np.ndarray:
-    """The per-pixel disparity (px/view) of ``f`` (V, U, Y, X, C) that the TV's angular differences follow.
-
-    Among the shears ``|d| <= DISPARITY_REACH + |d_inf|`` in steps of
-    ``DISPARITY_STEP``, the one that makes the views of the grayscale agree
-    best at each pixel (box-smoothed variance over the views). Returns
-    float32 of shape (Y, X).
-    """
-    reach = DISPARITY_REACH + abs(float(infinity_disparity))
-    n = 2 * int(math.ceil(reach / DISPARITY_STEP)) + 1
-    return disparity_map(gray(f), d_max=DISPARITY_STEP * (n // 2), n=n)
+    # the channels not solved yet show the input in the records' estimates
+    return (yield from _iter_tv(op, f, x0, p, weight, sigma, np.array(arr, dtype=np.float32), oriented, white))
 
 
 def deconvolve(

@@ -44,8 +44,9 @@ class Progress:
         Iterations planned for this stage (an upper bound with early stopping).
     loss : float
         Current objective value (NaN when the stage has none).
-    control_points : ndarray or None, shape (n, 3)
-        Current path estimate, when the solver estimates one.
+    control_points : ndarray or None, shape (n, 3) or (n, 6)
+        Current path estimate, when the solver estimates one (``(n, 6)``
+        with rotation).
     preview : ndarray or None
         A current light-field estimate, (V, U, Y, X[, C]) float32, when the
         caller asked for one (see :func:`with_previews`).
@@ -82,7 +83,15 @@ def run_to_completion(gen, callback=None):
     """Drive a solver generator to its end and return its result.
 
     ``callback(progress)`` is called on every record when given.
+
+    Raises
+    ------
+    TypeError
+        If ``callback`` is given but not callable (before any work).
     """
+    if callback is not None and not callable(callback):
+        gen.close()
+        raise TypeError(f"callback must be a function of a progress record; got {callback!r}")
     while True:
         try:
             record = next(gen)

@@ -171,11 +171,15 @@ class PlaneTextureResult:
     dwell_p : ndarray, float64, shape (S,)
         Out-of-plane positions ``p_z`` (view units per unit of ``x~``) of the profile's samples.
     dwell : ndarray, float64, shape (S,)
-        Estimated dwell-time profile: the fraction of the exposure spent at
-        each ``dwell_p`` (sums to 1).
+        The sharpness profile at ``dwell_p`` (sums to 1): each slice's
+        high-pass energy above the least of them. It peaks where the camera
+        dwelt; it is wider than the dwell itself, since the refocusing
+        softens every slice too, so it is a picture of the motion, not the
+        fraction of the exposure spent at each position.
     kernel : ndarray, float32, shape (K, K)
-        The 2D blur kernel of the refocused slice implied by the dwell
-        profile (sums to 1, centred).
+        The 2D blur kernel of the refocused slice that ``dwell`` would give
+        were it the dwell profile (sums to 1, centred); as wide as the
+        profile, so wider than the true kernel.
     valid_radius : float
         Radius in pixels around the image centre inside which the plane's
         angular samples stay within the aperture, ``d (U - 1) / 2``: the
@@ -290,14 +294,26 @@ def recover_plane_texture(
     a ``V x U`` grid of copies spaced ``d^2 p / R`` px: a blur whose transfer
     function falls off as ``1 / (1 + ζ |Ω|)`` (``|Ω|`` = max(|Ω_x|, |Ω_y|),
     rad/px). Multiplying the slice's spectrum by ``1 + ζ |Ω|`` restores the
-    texture. ζ is found automatically:
+    texture. Without the path:
 
-    1. refocus at the disparities ``d / (1 + d p_j / R)`` of a grid of
-       ``p_j``; the high-frequency magnitude of each slice measures how long
-       the camera dwelt at ``p_j`` (comparing slice magnitudes gives the
-       dwell-time profile, moved to zero mean, the gauge of blind estimates);
-    2. the dwell profile gives the slice's exact transfer function and
-       kernel; ζ is the least-squares fit of ``1 / (1 + ζ |Ω|)`` to it.
+    1. the disparity is the one at which the views, shifted into the centre
+       view's place, agree best near the image centre, where out-of-plane
+       motion blurs least (for a motion symmetric about its mean position,
+       close to the plane's disparity seen from there: the zero-mean gauge
+       of blind estimates; the spread of magnifications pulls it towards 0
+       by a few percent on long motions);
+    2. ζ is fitted where the centre view holds the sharp texture: near the
+       image centre out-of-plane motion does not blur it (its blur grows
+       with the distance from the centre), so ζ is the value for which
+       ``(1 + ζ |Ω|)`` times the slice's spectrum best matches the centre
+       view's there (log-magnitudes of radial frequency bands).
+
+    A sharpness profile over ``p_z`` is reported as well: the high-pass
+    energy of the slices refocused for a grid of positions ``p_j``, at the
+    disparities ``d / (1 + d p_j / R)``. It peaks where the camera dwelt,
+    but each slice is also softened by the refocusing itself, so the profile
+    is wider than the motion's dwell (a still camera gives a broad peak, not
+    a spike).
 
     The plane's angular samples leave the aperture at ``|x - c| > d (U-1)/2``
     px from the image centre, so the recovery is best within
@@ -310,10 +326,11 @@ def recover_plane_texture(
         out-of-plane motion (``d_inf = 0``).
     disparity : float, optional
         The plane's disparity in px/view (non-zero). By default the
-        disparity of the sharpest refocused slice, then moved to the mean
-        of the estimated dwell profile.
+        disparity at which the views agree best (step 1), searched over all
+        those at which they still overlap about the centre
+        (``|d| (max(U, V) - 1) / 2 <= 0.35 min(Y, X)``).
     p_range : float, default 3.0
-        The dwell profile is estimated on ``p_z`` in ``[-p_range, p_range]``.
+        The sharpness profile covers ``p_z`` in ``[-p_range, p_range]``.
     n_slices : int, default 31
         Number of slices of the profile.
     zeta : float, optional
@@ -336,21 +353,12 @@ def recover_plane_texture(
     rr = np.hypot(yy - (Y - 1) / 2.0, xx - (X - 1) / 2.0)
 
     if disparity is None:
-        d0 = _sharpest_disparity(arr, rr)
+        d = _agreeing_disparity(arr)
     else:
-        d0 = check_number(disparity, "disparity")
-        if d0 == 0:
+        d = check_number(disparity, "disparity")
+        if d == 0:
             raise ValueError("the plane's disparity must be non-zero: a plane at infinity shows no out-of-plane blur")
-
-    p, w, radius = _dwell_profile(arr, d0, rr, p_range, n_slices)
-    p_mean = float(np.sum(p * w))
-    d = d0 / (1.0 + d0 * p_mean / R)  # disparity at the mean position: zero-mean gauge
-    if disparity is None:
-        p, w, radius = _dwell_profile(arr, d, rr, p_range, n_slices)
-    else:
-        # the given disparity defines the gauge; report the profile relative to it
-        d = d0
-
+    p, w, radius = _dwell_profile(arr, d, rr, p_range, n_slices)
     refocused = refocus(arr, d)
     if zeta is None:
         zeta = _fit_zeta(refocused, arr[(V - 1) // 2, (U - 1) // 2], max(radius, 6.0))
@@ -370,14 +378,48 @@ def recover_plane_texture(
     )
 
 
-def _sharpest_disparity(arr: np.ndarray, rr: np.ndarray) -> float:
-    """The disparity of the sharpest refocused slice over a coarse sweep of [-4, 4] px/view."""
-    Y, X = arr.shape[2:4]
-    cand = np.linspace(-4.0, 4.0, 81)
-    cand = cand[np.abs(cand) > 0.05]
-    mask = rr <= 0.35 * min(X, Y)
-    scores = [_highpass_energy(refocus(arr, c), mask) for c in cand]
-    return float(cand[int(np.argmax(scores))])
+#: the disparity search: its step (px/view) on views of about SWEEP_PIXELS px, and the fraction of
+#: min(Y, X) about the image centre within which the views are compared
+SWEEP_STEP, SWEEP_PIXELS, AGREEMENT_RADIUS = 0.1, 64, 0.15
+
+
+def _agreeing_disparity(arr: np.ndarray) -> float:
+    """The disparity (px/view) at which the views, shifted into the centre view's place, agree best.
+
+    Agreement is the variance across the aligned views (grayscale), within
+    ``AGREEMENT_RADIUS min(Y, X)`` px of the image centre, where
+    out-of-plane motion blurs least. The sweep covers every non-zero
+    disparity whose shifts keep the compared pixels inside the views,
+    ``|d| (max(U, V) - 1) / 2 <= 0.35 min(Y, X)`` (at least ``|d| <= 4``),
+    at :data:`SWEEP_STEP` on views area-averaged to about
+    :data:`SWEEP_PIXELS` px (a disparity scales with the views), then
+    refines twice on the full views, each time 10 times finer.
+    """
+    V, U, Y, X = arr.shape[:4]
+    g = (arr.mean(axis=-1) if arr.ndim == 5 else arr).astype(np.float64)
+    k = max(1, min(Y, X) // SWEEP_PIXELS)
+    small = g[:, :, : Y // k * k, : X // k * k].reshape(V, U, Y // k, k, X // k, k).mean(axis=(3, 5))
+    d_max = max(4.0, 0.35 * min(Y, X) / max((max(U, V) - 1) / 2.0, 0.5)) / k
+    cand = np.arange(-d_max, d_max + SWEEP_STEP / 2, SWEEP_STEP)
+    best = k * _best_agreement(small, cand[np.abs(cand) > SWEEP_STEP / 2])
+    step = k * SWEEP_STEP
+    for _ in range(2):
+        best = _best_agreement(g, best + np.linspace(-1.5 * step, 1.5 * step, 31))
+        step /= 10.0
+    return best
+
+
+def _best_agreement(g: np.ndarray, cand: np.ndarray) -> float:
+    """The candidate disparity whose aligned views (V, U, Y, X) vary least about the image centre."""
+    V, U, Y, X = g.shape
+    yy, xx = np.mgrid[0:Y, 0:X]
+    mask = np.hypot(yy - (Y - 1) / 2.0, xx - (X - 1) / 2.0) <= max(AGREEMENT_RADIUS * min(X, Y), 2.0)
+    scores = []
+    for d in cand:
+        views = [_lerp_shift(_lerp_shift(g[v, u], d * (v - (V - 1) / 2.0), 0), d * (u - (U - 1) / 2.0), 1)[mask]
+                 for v in range(V) for u in range(U)]
+        scores.append(np.var(views, axis=0).mean() if d else np.inf)
+    return float(cand[int(np.argmin(scores))])
 
 
 def _dwell_profile(arr: np.ndarray, d: float, rr: np.ndarray, p_range: float, n_slices: int):

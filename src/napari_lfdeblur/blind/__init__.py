@@ -304,7 +304,9 @@ def _validate_input(blurred, infinity_disparity):
         raise ValueError(f"blind deblurring needs at least 2 x 2 views; got {V} x {U}")
     if Y < 4 or X < 4:
         raise ValueError(f"blind deblurring needs views of at least 4 x 4 pixels; got {Y} x {X}")
-    if (top := float(arr.max())) > BRIGHT_LIMIT:
+    if arr.dtype == bool:
+        arr = arr.astype(np.float32)
+    if (top := float(arr.max())) >= BRIGHT_LIMIT:
         white = f"{np.iinfo(arr.dtype).max} for {arr.dtype}" if arr.dtype.kind in "iu" else "255 for 8-bit values"
         raise ValueError(f"the blurred light field reaches {top:.4g}: blind deblurring takes values in [0, 1] (its "
                          f"edge weights are on that scale); divide it by its white level ({white})")
@@ -393,6 +395,8 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None, windows=None):
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages, info)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()
+    if p.final is None and (restore or light):  # the path stands, but nothing restored with it
+        info.update(restoration="none", message=info["message"] + "; final=None: the input is returned, unrestored")
     t2 = time.perf_counter()
     return BlindResult(lightfield=np.asarray(out, dtype=np.float32), control_points=cp, loss_history=est.loss_history,
                        params=p, timings={"path": t1 - t0, "final": t2 - t1, "total": t2 - t0}, info=info)

@@ -79,7 +79,7 @@ class _Alternation:
             self.stages.append((self.factors[-1], True, p.path.z_outer))
         lat = p.latent
         # reports per alternation: latent steps (at most those at the smallest lambda), fit reports, the end
-        lam_min = min(lat.l0_weight, lat.l0_weight * lat.l0_floor)
+        lam_min = lat.l0_weight * lat.l0_floor
         self.per_outer = (len(gs) * n_hqs_steps(lam_min, lat) * (lat.n_cg + 1)
                           + (p.path.steps - 1) // FIT_REPORT_EVERY + 1)
         self.history: list = []

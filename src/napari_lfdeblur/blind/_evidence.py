@@ -30,7 +30,7 @@ from ..priors import gradient_yx
 from ..progress import Progress
 from ._alternating import iter_alternating, relay
 from ._disparity import DISPARITY_PIXELS, disparity_map, downsample
-from ._latent import difference_pair, l0_latent
+from ._latent import difference_pair, l0_latent, n_hqs_steps
 from ._params import BlindParams
 
 __all__ = ["noise_sigma", "blur_reach", "evidence_weight", "blur_evidence", "evidence_message", "Identity",
@@ -76,7 +76,8 @@ def blur_reach(cp, n_times: int, g: torch.Tensor, frame=None) -> float:
     moves by ``s`` views (docs/model.md): the path's in-plane extent (views)
     times the 95th percentile of ``|d|`` (``g`` is refocused by ``d_inf``)
     over the pixels with the stronger half of the gradients, where the
-    disparity is measured (a flat region has none). A rotation (``cp`` of 6
+    disparity is measured (a flat region has none; 0 when the whole centre
+    view is flat, since no motion shows there). A rotation (``cp`` of 6
     columns) adds the largest range of its image displacement over the
     exposure at any pixel of ``g`` (placed in ``frame``, as in
     :class:`~napari_lfdeblur.blur.BlurOperator`).
@@ -89,6 +90,8 @@ def blur_reach(cp, n_times: int, g: torch.Tensor, frame=None) -> float:
     d = np.abs(disparity_map(small))
     gy, gx = gradient_yx(small.mean(dim=(0, 1))[None, None])
     mag = (gy * gy + gx * gx)[0, 0, ..., 0].cpu().numpy()
+    if not mag.max() > 0:
+        return 0.0  # a flat light field: no motion shows
     textured = mag >= np.median(mag)
     reach = extent * k * float(np.percentile(d[textured], 95))  # disparities of the k-times smaller image
     if pos.shape[1] == 6:
@@ -99,8 +102,8 @@ def blur_reach(cp, n_times: int, g: torch.Tensor, frame=None) -> float:
 
 
 def evidence_weight(p: BlindParams) -> float:
-    """The latent weight ``lambda`` of the evidence test: the smallest of the alternation."""
-    return p.latent.l0_weight * min(1.0, p.latent.l0_floor)
+    """The latent weight ``lambda`` of the evidence test: the floor of the alternation's, ``l0_weight * l0_floor``."""
+    return p.latent.l0_weight * p.latent.l0_floor
 
 
 def evidence_message(evidence: dict, required: bool = True, light: float = 0.0, brightest: float = 1.0) -> str:
@@ -139,7 +142,9 @@ def evidence_message(evidence: dict, required: bool = True, light: float = 0.0, 
     else:
         verdict = "the input is returned unchanged"
     dark = ""
-    if brightest < DARK_LEVEL:
+    if brightest <= 0:
+        dark = ". The light field is black"
+    elif brightest < DARK_LEVEL:
         dark = (f". The light field is dark (99.9 % of its centre view is below {brightest:.3g}) and the salient "
                 "edges are found on an absolute scale: stretched to [0, 1] first (value_range='auto' when reading, "
                 "lfdeblur --value-range auto), its blur may show")
@@ -167,7 +172,7 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device, frame=None):
     :class:`~napari_lfdeblur.blur.BlurOperator` (it matters for rotation).
 
     ``E = |K l - g|^2 / N + lam * edges / N`` of the salient-edge latent
-    (``lam`` the smallest weight of the alternation) is computed with
+    (``lam``: :func:`evidence_weight`) is computed with
     ``K = K_p`` (``E_blur``) and with ``K = I`` (``E_none``). The blur is
     found when ``E_none - E_blur > EVIDENCE_MARGIN sigma^2`` (``sigma``:
     :func:`noise_sigma`), ``(E_none - E_blur) / E_none > RELATIVE_MARGIN``
@@ -283,7 +288,7 @@ def iter_verdict(split, est, p: BlindParams, device, frame=None):
     def report(_, stage="evidence", loss=float("nan"), path=cp, done=0.0):
         # a stage of its own, before the final one: the test takes the first tenth of it, the agreement
         # check's two estimates the rest (when it runs; else the stage ends there)
-        return Progress(stage=stage, iteration=round(1000 * done), n_iterations=1000, loss=loss,
+        return Progress(stage=stage, iteration=max(1, round(1000 * done)), n_iterations=1000, loss=loss,
                         control_points=path, stage_index=est.n_stages, n_stages=est.n_stages + 2)
 
     def report_part(item):  # the agreement check's estimates, with their own path, fit and progress
@@ -292,7 +297,13 @@ def iter_verdict(split, est, p: BlindParams, device, frame=None):
         return report(None, f"evidence (agreement check, part {i + 1} of 2)", rec.loss, rec.control_points,
                       0.1 + 0.45 * (i + min(1.0, rec.fraction / path_share)))
 
-    evidence = yield from relay(blur_evidence(split[0][0], cp, p, device, frame), report)
+    n_test, tick = 2 * n_hqs_steps(evidence_weight(p), p.latent) * (p.latent.n_cg + 1), [0]  # its latents' steps
+
+    def report_test(_):
+        tick[0] += 1
+        return report(None, done=0.1 * min(1.0, tick[0] / n_test))
+
+    evidence = yield from relay(blur_evidence(split[0][0], cp, p, device, frame), report_test)
     evidence.update(disagreement=float("nan"), agreement_paths=[])
     light = p.light_restoration
     if evidence["blur_found"] or not p.require_evidence or light * evidence["reach"] < MIN_REACH:

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._params import JsonParams, check_bool, check_float, check_int
+from .._params import JsonParams, check_fields
 from ..deconvolution import DeconvolutionParams
 
 __all__ = ["METHODS", "MOTIONS", "LatentParams", "PathFitParams", "RotationFitParams", "JointParams", "BlindParams",
@@ -16,23 +16,6 @@ METHODS = ("alternating", "joint")
 MOTIONS = ("3dof", "6dof")
 
 
-def _check(obj, prefix: str, ints=None, nonneg=(), positive=(), signed=(), unit=(), bools=()) -> None:
-    """Check the fields of a parameter dataclass (see :func:`check_int`, :func:`check_float`).
-
-    ``unit`` fields must be in (0, 1] (they are also in ``positive``).
-    """
-    for name, lo in (ints or {}).items():
-        check_int(obj, name, lo, f"{prefix}.{name}")
-    for kind, names in (("nonneg", nonneg), ("positive", positive), ("signed", signed)):
-        for name in names:
-            check_float(obj, name, kind, f"{prefix}.{name}")
-    for name in unit:
-        if getattr(obj, name) > 1:
-            raise ValueError(f"{prefix}.{name} must be in (0, 1]; got {getattr(obj, name)}")
-    for name in bools:
-        check_bool(obj, name, f"{prefix}.{name}")
-
-
 @dataclass(frozen=True)
 class LatentParams(JsonParams):
     """The salient-edge latent of the ``'alternating'`` method (:attr:`BlindParams.latent`).
@@ -40,11 +23,13 @@ class LatentParams(JsonParams):
     Attributes
     ----------
     l0_weight : float
-        ``lambda`` of the L0 gradient latent at the coarsest level (>= 0).
+        ``lambda`` of the L0 gradient latent at the coarsest level (> 0).
     l0_decay : float
         ``lambda`` is multiplied by this after every alternation, in (0, 1]
         (floor ``l0_weight * l0_floor``).
     l0_floor : float
+        The floor of ``lambda`` as a fraction of ``l0_weight``, in (0, 1];
+        also the evidence test's weight, ``l0_weight * l0_floor``.
     angular_weight : float
         Weight of the angular (``v, u``) differences in the L0 latent
         (0: spatial differences only).
@@ -90,9 +75,10 @@ class LatentParams(JsonParams):
     _what = "blind latent"
 
     def __post_init__(self):
-        _check(self, "BlindParams.latent", ints={"n_cg": 1, "edge_sigma_from": 1},
-               nonneg=("l0_weight", "l0_floor", "angular_weight", "edge_sigma"),
-               positive=("hqs_beta_max", "l0_decay", "hqs_kappa"), signed=("edge_anisotropy",), unit=("l0_decay",))
+        check_fields(self, "BlindParams.latent", ints={"n_cg": 1, "edge_sigma_from": 1},
+               nonneg=("angular_weight", "edge_sigma"),
+               positive=("l0_weight", "l0_floor", "hqs_beta_max", "l0_decay", "hqs_kappa"),
+               signed=("edge_anisotropy",), unit=("l0_decay", "l0_floor"))
         if self.hqs_kappa <= 1:
             raise ValueError(f"BlindParams.latent.hqs_kappa must be > 1; got {self.hqs_kappa}")
 
@@ -218,7 +204,7 @@ class PathFitParams(JsonParams):
         ints = {"region": 0, "n_regions": 1, "n_levels": 1, "min_size": 4, "max_size": 0, "n_outer": 1,
                 "n_restarts": 1, "steps": 1, "n_pixels": 16, "n_random": 0, "n_random_later": 0, "n_perturb": 0,
                 "tiles": 1, "z_outer": 0}
-        _check(self, "BlindParams.path", ints=ints,
+        check_fields(self, "BlindParams.path", ints=ints,
                nonneg=("init_length", "tol", "robust", "perturb", "disparity_weight", "z_box"),
                positive=("lr",), bools=("try_mirror", "estimate_z"))
         if 0 < self.region < self.min_size:
@@ -266,7 +252,7 @@ class RotationFitParams(JsonParams):
 
     def __post_init__(self):
         ints = {"n_outer": 1, "steps": 1, "n_times": 2, "warm_hqs_steps": 0}
-        _check(self, "BlindParams.rotation", ints=ints, positive=("lr",), nonneg=("fit_tol", "path_tol"))
+        check_fields(self, "BlindParams.rotation", ints=ints, positive=("lr",), nonneg=("fit_tol", "path_tol"))
 
 
 @dataclass(frozen=True)
@@ -302,7 +288,7 @@ class JointParams(JsonParams):
     _what = "blind joint"
 
     def __post_init__(self):
-        _check(self, "BlindParams.joint", ints={"n_iter": 0}, nonneg=("prior_weight", "prior_floor", "eps_min"),
+        check_fields(self, "BlindParams.joint", ints={"n_iter": 0}, nonneg=("prior_weight", "prior_floor", "eps_min"),
                positive=("lr", "lf_lr", "eps", "prior_decay", "eps_decay"), unit=("prior_decay", "eps_decay"))
 
 
@@ -336,7 +322,8 @@ class BlindParams(JsonParams):
         Exposure instants ``T`` of the model during path estimation (>= 2).
     max_extent : float
         Control points are kept within ``+-max_extent`` views of the centre
-        in ``x`` and ``y`` (and ``+-max_extent`` in ``p_z``); 0 means
+        in ``x`` and ``y``, and ``p_z`` within ``path.z_box`` times that
+        (``'alternating'``) or ``+-max_extent`` (``'joint'``); 0 means
         ``max(0.5, 0.35 (min(V, U) - 1))``.
     final_n_times : int
         Exposure instants of the final non-blind solve.
@@ -393,7 +380,7 @@ class BlindParams(JsonParams):
             raise ValueError(f"unknown motion {self.motion!r}: choose one of {', '.join(MOTIONS)}")
         if self.motion == "6dof" and self.method != "alternating":
             raise ValueError("motion='6dof' needs method='alternating'")
-        _check(self, "BlindParams", ints={"n_control_points": 2, "n_times": 2, "final_n_times": 2},
+        check_fields(self, "BlindParams", ints={"n_control_points": 2, "n_times": 2, "final_n_times": 2},
                nonneg=("max_extent", "light_restoration"), bools=("require_evidence",))
         if self.light_restoration > 1:
             raise ValueError(f"BlindParams.light_restoration must be in [0, 1]; got {self.light_restoration}")
@@ -466,7 +453,10 @@ class BlindResult:
         scaled by ``params.light_restoration``; ``'none'``: the input
         returned) and, when no significant blur was found,
         ``'rejected_path'`` (the path estimated; ``control_points`` is then
-        the path restored with, zero when ``lightfield`` is the input);
+        the path restored with, zero when ``lightfield`` is the input).
+        With ``params.final=None`` nothing is restored: ``'restoration'``
+        is ``'none'`` and ``control_points`` the path a final stage would
+        have restored with;
         ``'brightest'`` (the input's centre view's 99.9th percentile);
         ``'final_weight'`` (the final stage's weight, when it ran)."""
 

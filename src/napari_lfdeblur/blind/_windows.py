@@ -16,6 +16,7 @@ import operator
 import numpy as np
 import torch
 
+from ..blur import to_tensor
 from ._disparity import gray, shear
 from ._params import BlindParams
 from ._region import choose_regions
@@ -38,7 +39,8 @@ def check_windows(windows, shape, p: BlindParams):
     ------
     ValueError
         On an empty list, a window that is not four whole numbers, one that
-        is too small or reaches outside the view, or too many windows.
+        is too small or reaches outside the view, windows that overlap, or
+        too many windows.
     """
     if windows is None:
         return None
@@ -58,6 +60,11 @@ def check_windows(windows, shape, p: BlindParams):
     if len(out) > 1 and p.path_windows() == 1:
         raise ValueError(f"motion={p.motion!r} with method={p.method!r} estimates the path on one window; got "
                          f"{len(out)}")
+    for i, a in enumerate(out):  # the agreement check deals the windows out into two parts, which must be disjoint
+        for b in out[i + 1 :]:
+            if a[0] < b[0] + b[2] and b[0] < a[0] + a[2] and a[1] < b[1] + b[3] and b[1] < a[1] + a[3]:
+                raise ValueError(f"windows {a} and {b} (y0, x0, height, width) overlap: the windows must be "
+                                 "disjoint (the check of a weak estimate compares parts of the data estimated apart)")
     return out
 
 
@@ -107,9 +114,7 @@ def path_windows(arr, d_inf, p: BlindParams, dev, sheared, windows=None):
     ``p.path.region``.
     """
     Y, X = arr.shape[2:4]
-    f = torch.as_tensor(np.ascontiguousarray(arr), dtype=torch.float32, device=dev)
-    g = gray(f if arr.ndim == 5 else f.unsqueeze(-1)).contiguous()
-    del f
+    g = gray(to_tensor(arr, dev)).contiguous()
     if sheared:
         g = shear(g, d_inf)
     if windows is None and not p.path.region:
