@@ -127,6 +127,12 @@ def test_demo_quick(tmp_path):
     np.testing.assert_allclose(load_path_json(out / "synthetic_blurred.path.json"), summary["true_control_points"])
     # every light field it writes has the path beside it, and the summary lists exactly what is there
     np.testing.assert_allclose(load_path_json(out / "lytro_deconvolved.path.json"), summary["true_control_points"])
+    # and states the instants it was blurred with (64: `lfdeblur deconvolve` of it used 32) and restored with
+    from napari_lfdeblur import read_path_json
+
+    for kind, n_times in (("blurred", summary["render_n_times"]), ("deconvolved", 32)):
+        stated = read_path_json(out / f"synthetic_{kind}.path.json")[1]
+        assert (stated["n_times"], stated["infinity_disparity"]) == (n_times, 0.0)
     assert sorted(summary["files"]) == sorted(p.name for p in out.iterdir())
 
 

@@ -26,6 +26,8 @@ __all__ = ["DEMO_PATH", "run_demo"]
 DEMO_PATH = center_path(np.array([[-1.2, -0.5, -0.25], [0.4, 1.1, 0.0], [1.1, -0.4, 0.25]]))
 #: instants used to render the ground-truth blur (more than the solvers use)
 RENDER_N_TIMES = 64
+#: instants of the known-path restoration's model (deconvolve's default)
+RESTORE_N_TIMES = 32
 NOISE_SIGMA = 0.002
 #: border pixels left out of PSNR
 CROP = 8
@@ -126,18 +128,20 @@ def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> l
 
     files = []
 
-    def save(kind, lf, cp):  # the light field and, beside it, the path it was blurred or restored with
-        write_lightfield(out / f"{name}_{kind}.npz", lf, overwrite=True, control_points=cp)
+    def save(kind, lf, cp, n_times):  # the light field and, beside it, the path it was blurred or restored with
+        write_lightfield(out / f"{name}_{kind}.npz", lf, overwrite=True, control_points=cp,
+                         metadata={"n_times": n_times, "infinity_disparity": 0.0})
         files.extend([f"{name}_{kind}.npz", f"{name}_{kind}.path.json"])
 
     with timer("blur"):
         blurred = simulate_blur(sharp, DEMO_PATH, n_times=RENDER_N_TIMES, device=device)
         blurred = np.clip(blurred + rng.normal(0, NOISE_SIGMA, blurred.shape), 0, 1).astype(np.float32)
-        save("blurred", blurred, DEMO_PATH)
+        save("blurred", blurred, DEMO_PATH, RENDER_N_TIMES)
     results = {"blurred": blurred}
     with timer("deconvolve"):
-        restored = deconvolve(blurred, DEMO_PATH, device=device, **({"n_iter": 30} if quick else {}))
-        save("deconvolved", restored, DEMO_PATH)
+        restored = deconvolve(blurred, DEMO_PATH, n_times=RESTORE_N_TIMES, device=device,
+                              **({"n_iter": 30} if quick else {}))
+        save("deconvolved", restored, DEMO_PATH, RESTORE_N_TIMES)
     results["deconvolved (path known)"] = restored
     paths, notes = {"true": DEMO_PATH}, {}
     if blind:
@@ -147,7 +151,7 @@ def _run_sample(name, sharp, out, rng, rec, timer, *, device, quick, blind) -> l
         with timer("blind"):
             res = blind_deblur(blurred, params=_blind_params(quick), device=device, seed=0)
             est_cp = res.control_points
-            save("blind", res.lightfield, est_cp)
+            save("blind", res.lightfield, est_cp, res.params.final_n_times)
         results["blind"] = res.lightfield
         rec["blind_control_points"] = np.asarray(est_cp).tolist()
         rec["blind_path_error"] = path_error(est_cp, DEMO_PATH, lightfield=sharp).as_dict()

@@ -317,7 +317,10 @@ def recover_plane_texture(
 
     The plane's angular samples leave the aperture at ``|x - c| > d (U-1)/2``
     px from the image centre, so the recovery is best within
-    ``valid_radius`` of the centre.
+    ``valid_radius`` of the centre. Refocusing shifts the views bilinearly,
+    which smooths them where a shift is a fraction of a pixel: at a
+    non-integer disparity the slice is softer than the plane, and at small
+    ones the recovery can be worse than the blurred centre view.
 
     Parameters
     ----------
