@@ -76,9 +76,9 @@ class LatentParams(JsonParams):
 
     def __post_init__(self):
         check_fields(self, "BlindParams.latent", ints={"n_cg": 1, "edge_sigma_from": 1},
-               nonneg=("angular_weight", "edge_sigma"),
-               positive=("l0_weight", "l0_floor", "hqs_beta_max", "l0_decay", "hqs_kappa"),
-               signed=("edge_anisotropy",), unit=("l0_decay", "l0_floor"))
+                     nonneg=("angular_weight", "edge_sigma"),
+                     positive=("l0_weight", "l0_floor", "hqs_beta_max", "l0_decay", "hqs_kappa"),
+                     signed=("edge_anisotropy",), unit=("l0_decay", "l0_floor"))
         if self.hqs_kappa <= 1:
             raise ValueError(f"BlindParams.latent.hqs_kappa must be > 1; got {self.hqs_kappa}")
 
@@ -205,8 +205,8 @@ class PathFitParams(JsonParams):
                 "n_restarts": 1, "steps": 1, "n_pixels": 16, "n_random": 0, "n_random_later": 0, "n_perturb": 0,
                 "tiles": 1, "z_outer": 0}
         check_fields(self, "BlindParams.path", ints=ints,
-               nonneg=("init_length", "tol", "robust", "perturb", "disparity_weight", "z_box"),
-               positive=("lr",), bools=("try_mirror", "estimate_z"))
+                     nonneg=("init_length", "tol", "robust", "perturb", "disparity_weight", "z_box"),
+                     positive=("lr",), bools=("try_mirror", "estimate_z"))
         if 0 < self.region < self.min_size:
             raise ValueError(f"BlindParams.path.region must be 0 or at least min_size = {self.min_size} px; "
                              f"got {self.region}")
@@ -289,7 +289,7 @@ class JointParams(JsonParams):
 
     def __post_init__(self):
         check_fields(self, "BlindParams.joint", ints={"n_iter": 0}, nonneg=("prior_weight", "prior_floor", "eps_min"),
-               positive=("lr", "lf_lr", "eps", "prior_decay", "eps_decay"), unit=("prior_decay", "eps_decay"))
+                     positive=("lr", "lf_lr", "eps", "prior_decay", "eps_decay"), unit=("prior_decay", "eps_decay"))
 
 
 def _default_final() -> DeconvolutionParams:
@@ -381,7 +381,7 @@ class BlindParams(JsonParams):
         if self.motion == "6dof" and self.method != "alternating":
             raise ValueError("motion='6dof' needs method='alternating'")
         check_fields(self, "BlindParams", ints={"n_control_points": 2, "n_times": 2, "final_n_times": 2},
-               nonneg=("max_extent", "light_restoration"), bools=("require_evidence",))
+                     nonneg=("max_extent", "light_restoration"), bools=("require_evidence",))
         if self.light_restoration > 1:
             raise ValueError(f"BlindParams.light_restoration must be in [0, 1]; got {self.light_restoration}")
         for name, cls in _NESTED.items():
