@@ -217,15 +217,16 @@ def test_2d_layer_and_empty_selection_notify(make_napari_viewer, notifications):
         assert w.run() is None
     assert len([n for n in notifications if n[0] == "error"]) == 3
     assert all("no light-field layer" in msg for kind, msg in notifications)
-    # a 2D image
+    # a 2D image (an EPI, say) is not offered as the input: still nothing to run on
     notifications.clear()
     viewer.add_image(np.zeros((16, 16), np.float32), name="flat")
     for w in widgets:
-        w.layer_combo.set_layer("flat")
+        w.layer_combo.reset_choices()
+        assert w.layer_combo.value is None and "flat" not in [str(c) for c in w.layer_combo.choices]
         assert w.run() is None
         assert not w.is_running
     errors = [msg for kind, msg in notifications if kind == "error"]
-    assert len(errors) == 3 and all("'flat'" in m and "4D" in m for m in errors)
+    assert len(errors) == 3 and all("no light-field layer" in m for m in errors)
     assert len(viewer.layers) == 1
 
 
@@ -1061,12 +1062,56 @@ def test_widgets_take_the_infinity_disparity_a_layer_states(make_napari_viewer, 
     assert w.form.infinity_disparity.value == -1.5
     assert notifications == [("warning", "Blind deblur: layer 'odd' states infinity_disparity = 'far', which this "
                                          "form cannot take (-20 to 20); infinity_disparity stays -1.5")]
-    w.layer_combo.set_layer(plain)  # states nothing: the user's value stays
-    assert w.form.infinity_disparity.value == -1.5
+    notifications.clear()
+    w.layer_combo.set_layer(plain)  # states nothing: the capture's value is not carried over to another one
+    assert w.form.infinity_disparity.value == 0.0
+    assert notifications == [("info", "Blind deblur: layer 'plain' states no infinity disparity; the previous "
+                                      "layer's is not carried over (set to 0)")]
+    w.form.infinity_disparity.value = 0.75  # but a value the user typed stays
+    w.layer_combo.set_layer(odd)
+    w.layer_combo.set_layer(plain)
+    assert w.form.infinity_disparity.value == 0.75
+    # a stated value keeps its decimals (the field rounded 0.125 to 0.13, silently)
+    w.layer_combo.set_layer(viewer.add_image(lf, name="fine", metadata={"infinity_disparity": 0.125}))
+    assert w.form.infinity_disparity.value == 0.125
     # the deconvolution widget too (the path comes from elsewhere)
     d = _dock(viewer, DeconvolveWidget(viewer))
     d.layer_combo.set_layer(stated)
     assert d.form.infinity_disparity.value == -1.5
+
+
+def test_widgets_follow_an_input_updated_in_place_and_record_every_parameter(make_napari_viewer, qtbot, lf,
+                                                                             notifications):
+    # a re-run of Simulate blur updates its result layer in place: the deconvolution widget, with that layer
+    # chosen, takes the new path, T and d_inf (it kept the first run's and deconvolved with them)
+    from napari_lfdeblur._napari.widgets import DeconvolveWidget, SimulateBlurWidget
+    from napari_lfdeblur.deconvolution import DeconvolutionParams
+    from napari_lfdeblur.path import arc_path
+
+    viewer = make_napari_viewer()
+    viewer.add_image(lf, name="scene")
+    s = _dock(viewer, SimulateBlurWidget(viewer))
+    s.layer_combo.set_layer("scene")
+    s.run()
+    _wait_done(qtbot, s)
+    d = _dock(viewer, DeconvolveWidget(viewer))
+    d.layer_combo.set_layer("scene blurred")
+    first = d.table.control_points()
+    s.set_path(arc_path(2.0, 0.3))
+    s.form.n_times.value, s.form.infinity_disparity.value = 8, 0.5
+    s.run()
+    _wait_done(qtbot, s)
+    arc = arc_path(2.0, 0.3)
+    assert first.shape != arc.shape or not np.allclose(first, arc, atol=1e-3)  # the first run's path
+    np.testing.assert_allclose(d.table.control_points(), arc, atol=1e-6)
+    assert (d.form.n_times.value, d.form.infinity_disparity.value) == (8, 0.5)
+    d.form.n_iter.value = 3
+    d.run()
+    _wait_done(qtbot, d)
+    recorded = viewer.layers["scene blurred deconvolved"].metadata["parameters"]
+    assert set(DeconvolutionParams().to_dict()) <= set(recorded)  # tol, clip, angular, ... too
+    assert (recorded["n_times"], recorded["infinity_disparity"], recorded["n_iter"]) == (8, 0.5, 3)
+    assert not [n for n in notifications if n[0] == "error"], notifications
 
 
 def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_viewer, monkeypatch, lf,

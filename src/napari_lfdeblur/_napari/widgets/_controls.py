@@ -35,6 +35,7 @@ __all__ = [
     "PathTable",
     "device_choice",
     "fspin",
+    "infinity_disparity_field",
     "has_path",
     "heading",
     "is_image",
@@ -96,6 +97,9 @@ def set_stated(field, value, source: str) -> bool:
         usable = False
     if usable:
         field.value = int(number) if isinstance(field, SpinBox) else number
+        if abs(field.value - number) > 1e-12 * max(1.0, abs(number)):  # the field's decimals rounded it
+            notify_warning(f"{source} states {field.name} = {number!r}; the form holds {field.value!r}, "
+                           "which is used")
     else:
         notify_warning(f"{source} states {field.name} = {value!r}, which this form cannot take "
                        f"({field.min:g} to {field.max:g}); {field.name} stays {field.value:g}")
@@ -138,6 +142,13 @@ def fspin(name: str, value: float, lo: float, hi: float, step: float = 0.1, labe
           tooltip: str = "") -> FloatSpinBox:
     """A floating-point field of a form (the step sets the shown decimals)."""
     return FloatSpinBox(name=name, label=label or name, value=value, min=lo, max=hi, step=step, tooltip=tooltip)
+
+
+def infinity_disparity_field(tooltip: str) -> FloatSpinBox:
+    """The ``infinity_disparity`` field (px/view), to 4 decimals (a stated value keeps them); arrows step by 0.1."""
+    field = fspin("infinity_disparity", 0.0, -20.0, 20.0, 1e-4, label="infinity disparity", tooltip=tooltip)
+    field.native.setSingleStep(0.1)
+    return field
 
 
 def device_choice() -> ComboBox:

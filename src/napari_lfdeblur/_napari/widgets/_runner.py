@@ -29,7 +29,7 @@ from napari.qt.threading import thread_worker
 from ...progress import Cancelled, with_previews
 from .._torch_thread import iterate
 from ..layers import LayerError, add_layer, lightfield_from_layer
-from ._controls import LayerChoice, is_image, notify_error, notify_info, notify_warning, placed
+from ._controls import LayerChoice, is_lightfield, notify_error, notify_info, notify_warning, placed
 
 log = logging.getLogger(__name__)
 
@@ -156,7 +156,7 @@ class SolverWidget(Container):
         self._cancel_reported = False
         self.last_result = None
         self.last_layers: list = []
-        self.layer_combo = LayerChoice(napari_viewer, predicate=is_image, name="layer", label="input layer",
+        self.layer_combo = LayerChoice(napari_viewer, predicate=is_lightfield, name="layer", label="input layer",
                                        tooltip="the 4D light-field layer to work on (it is never modified)")
         self.form = Container(name="form", widgets=[self.layer_combo])
         self.run_button = PushButton(name="run_button", text="Run")
@@ -165,6 +165,23 @@ class SolverWidget(Container):
         self.cancel_button.changed.connect(self.cancel)
         self.progress = ProgressPanel()
         super().__init__(labels=False)
+
+    def follow_input(self, callback) -> None:
+        """Call ``callback()`` now, when another input layer is chosen, and when the chosen layer's metadata is
+        replaced (another widget's re-run updates its result layer in place, with the path it was made with)."""
+        watched = []
+
+        def rewatch(*_):
+            for layer in watched:
+                layer.events.metadata.disconnect(callback)
+            watched.clear()
+            if self.layer_combo.value is not None:
+                watched.append(self.layer_combo.value)
+                watched[0].events.metadata.connect(callback)
+            callback()
+
+        self.layer_combo.changed.connect(rewatch)
+        rewatch()
 
     def assemble(self, before=(), after=()) -> None:
         """Lay out: the form, ``before``, Run / Cancel, the progress panel, ``after``."""

@@ -61,6 +61,7 @@ from ._controls import (
     LayerChoice,
     device_choice,
     fspin,
+    infinity_disparity_field,
     has_path,
     heading,
     notify_info,
@@ -149,8 +150,7 @@ def _fields(viewer) -> list:
               "input (BlindParams.light_restoration; 0: the input)"),
         device_choice(),
         spin("seed", 0, 0, 2**31 - 1, tooltip="random seed of the initial path"),
-        fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
-              tooltip=INFINITY_DISPARITY_TIP),
+        infinity_disparity_field(INFINITY_DISPARITY_TIP),
         fspin("edge_anisotropy", 0.0, -2.0, 2.0, 0.05, label="views softer along x (px)",
               tooltip="how much softer the camera's views are along x than along y, px "
               "(0: the same; see docs/blind.md)"),
@@ -184,11 +184,10 @@ class BlindDeblurWidget(SolverWidget):
         self.epi = EpiPanel(napari_viewer)
         caption = Label(value="camera path (solid: estimate, dashed: true)")
         self.assemble(after=[heading("Path and loss"), caption, self.plot, self.loss_plot, self.epi])
-        self.layer_combo.changed.connect(self._input_changed)
         self.form.preset.changed.connect(self._preset_changed)
         self.form.restore_anyway.changed.connect(self._restore_anyway_changed)
         self._preset_changed()
-        self._input_changed()
+        self.follow_input(self._input_changed)
         self._next_draw = 0.0
         self.preview_updates = 0
         self.path_preview_updates = 0
@@ -212,7 +211,8 @@ class BlindDeblurWidget(SolverWidget):
     def _input_changed(self, *_):
         """Take the true path and the infinity disparity the chosen layer states, where it states them.
 
-        A true path taken from the previous input is dropped when the new one states none.
+        A true path or an infinity disparity taken from the previous input is dropped when the new one states
+        none (the disparity back to 0, with a notice).
         """
         layer = self.layer_combo.value
         if layer is None:
@@ -222,9 +222,14 @@ class BlindDeblurWidget(SolverWidget):
             self._true_from_input = layer
         elif self.form.true_path.value is not None and self.form.true_path.value is getattr(self, "_true_from_input", 0):
             self.form.true_path.value = None
+        field = self.form.infinity_disparity
         if "infinity_disparity" in layer.metadata:
-            set_stated(self.form.infinity_disparity, layer.metadata["infinity_disparity"],
-                       f"{self.title}: layer {layer.name!r}")
+            if set_stated(field, layer.metadata["infinity_disparity"], f"{self.title}: layer {layer.name!r}"):
+                self._dinf_from_input = field.value
+        elif field.value != 0.0 and field.value == getattr(self, "_dinf_from_input", None):
+            field.value, self._dinf_from_input = 0.0, None
+            notify_info(f"{self.title}: layer {layer.name!r} states no infinity disparity; the previous layer's is "
+                        "not carried over (set to 0)")
 
     def true_path(self):
         """The chosen true path, or None.

@@ -35,6 +35,7 @@ from ._controls import (
     device_choice,
     fill_path,
     fspin,
+    infinity_disparity_field,
     has_path,
     heading,
     set_stated,
@@ -54,8 +55,7 @@ def _fields() -> list:
 
     return [
         spin("n_times", 32, 2, 1024, label="instants T", tooltip="exposure instants T of the blur model"),
-        fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
-              tooltip=INFINITY_DISPARITY_TIP),
+        infinity_disparity_field(INFINITY_DISPARITY_TIP),
         ComboBox(name="method", choices=[m for m in METHODS if m != "auto"], value="tv",
                  tooltip="tv: 4D total variation, any path and d_inf; inplane: the exact angular solve, "
                          "p_z = 0 and d_inf = 0 only"),
@@ -99,9 +99,8 @@ class DeconvolveWidget(SolverWidget):
         self.plot = PathPlot()
         self.epi = EpiPanel(napari_viewer)
         self.assemble(before=[heading("Camera path"), self.path_source, self.table, self.plot], after=[self.epi])
-        self.layer_combo.changed.connect(self._input_changed)
         self.table.changed.connect(self._replot)
-        self._input_changed()
+        self.follow_input(self._input_changed)
 
     # ------------------------------------------------------------ path
     def set_path(self, control_points, metadata=None) -> None:
@@ -148,14 +147,16 @@ class DeconvolveWidget(SolverWidget):
         return p
 
     def make_job(self, layer, lf):
-        from ...deconvolution import iter_deconvolve
+        from ...deconvolution import DeconvolutionParams, iter_deconvolve
 
         cp = self.table.control_points()
         p = self.parameters()
+        call = {k: p.pop(k) for k in ("n_times", "infinity_disparity", "device")}
         # argument errors surface here, in the GUI thread, as a notification
-        gen = iter_deconvolve(lf, cp, **p)
+        solver = DeconvolutionParams().replace(**p)
+        gen = iter_deconvolve(lf, cp, params=solver, **call)
         warn_view_mismatch(self.title, self.table, lf.shape)
-        self._job = {"source": layer.name, "cp": cp, "params": p}
+        self._job = {"source": layer.name, "cp": cp, "params": {**solver.to_dict(), **call}}  # all, for the result
         return lambda: gen
 
     def on_progress(self, progress) -> None:

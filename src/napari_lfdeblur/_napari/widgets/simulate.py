@@ -24,7 +24,8 @@ from magicgui.widgets import ComboBox, Container, PushButton
 from ...path import MAX_ROTATION, preset_path, random_path
 from ...progress import Progress
 from ..layers import lightfield_layer_data, lightfield_metadata, path_layer_data
-from ._controls import PathSource, PathTable, device_choice, fill_path, fspin, heading, spin, warn_view_mismatch
+from ._controls import (PathSource, PathTable, device_choice, fill_path, fspin, heading, infinity_disparity_field, spin,
+                        warn_view_mismatch)
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
@@ -58,8 +59,7 @@ class SimulateBlurWidget(SolverWidget):
         super().__init__(napari_viewer)
         self.form.extend([
             spin("n_times", 32, 2, 1024, label="instants T", tooltip="exposure instants T"),
-            fspin("infinity_disparity", 0.0, -20.0, 20.0, 0.1, label="infinity disparity",
-                  tooltip="infinity disparity d_inf, px/view"),
+            infinity_disparity_field("infinity disparity d_inf, px/view"),
             device_choice(),
         ])
         self.path_form = _path_form()
