@@ -192,9 +192,16 @@ def test_a_rerun_skips_finished_items_and_redoes_the_others(client, inputs, tmp_
     assert np.array_equal(read_lightfield(out / "scene2_0000.npz"), before)
     fourth = simulate_dataset(inputs, out, n_per_input=2, client=client, device="cpu", overwrite=True)
     assert fourth.n_ok == 6
-    # other parameters into the same folder: existing outputs are never replaced without overwrite
+    # an item whose path file was lost since is redone (it failed as 'not this item's output', at every rerun)
+    (out / "scene1_0000.path.json").unlink()
+    fifth = simulate_dataset(inputs, out, n_per_input=2, client=client, device="cpu")
+    assert (fifth.n_ok, fifth.n_skipped, fifth.n_failed) == (1, 5, 0) and (out / "scene1_0000.path.json").is_file()
+    # other parameters into the same folder: existing outputs are never replaced without overwrite, and the
+    # dataset card keeps describing what the folder holds (it took the failed run's command)
+    card = (out / "README.md").read_text()
     changed = simulate_dataset(inputs, out, n_per_input=1, noise=0.1, client=client, device="cpu")
     assert changed.n_failed == 3 and changed.n_ok == 0
+    assert (out / "README.md").read_text() == card
 
 
 def test_a_killed_run_leaves_no_corrupt_file_and_a_rerun_completes_it(client, tmp_path):

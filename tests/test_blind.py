@@ -631,6 +631,13 @@ def test_bad_input_gives_clear_errors():
     for bad in ({"l0_weight": 0.0}, {"l0_floor": 0.0}, {"l0_floor": 2.0}):
         with pytest.raises(ValueError, match=f"latent.{next(iter(bad))}"):
             BlindParams().replace(latent=bad)
+    # a final in-plane solve cannot restore a path with p_z (estimated by default) or d_inf != 0: refused before
+    # the path stage (it failed after it)
+    inplane = BlindParams().replace(final={"method": "inplane"})
+    for p, d_inf in ((inplane, 0.0), (inplane.replace(path={"estimate_z": False}), 0.5)):
+        with pytest.raises(ValueError, match="final.method='inplane'"):
+            iter_blind_deblur(good, params=p, infinity_disparity=d_inf)
+    iter_blind_deblur(good, params=inplane.replace(path={"estimate_z": False})).close()
 
 
 def test_a_light_field_on_another_scale_is_refused_not_returned_unchanged():
@@ -881,6 +888,11 @@ def test_memory_estimate_grows_with_size():
     assert 0 < small < big
     # at least the colour input, output and a few work copies
     assert big > 9 * 9 * 376 * 541 * 3 * 4 * 5
+    # without a final stage (final=None) the path stage is the peak: no tiles are planned for a stage that
+    # does not run (it warned 'restoring the light field in tiles', and restored nothing)
+    shape, path_only = (9, 9, 376, 541, 3), BlindParams().replace(final=None)
+    assert blind.estimate_blind_memory(shape, path_only) == _memory._memory_of_stages(shape, path_only)[1] < big
+    assert _memory.plan_tiles(shape, path_only, blind.estimate_blind_memory(shape, path_only)) is None
 
 
 def test_plan_run_tiles_on_the_gpu_or_falls_back_to_the_cpu():
@@ -957,6 +969,8 @@ def test_a_memory_warning_names_the_callers_line_and_does_not_claim_tiles_a_smal
     assert [(w.filename, w.lineno) for w in said] == [(__file__, line), (__file__, line + 2)]  # not the library's
     for w in said:  # 24x20 views are one tile (it said 'tiles of 24x20', 'on 128x128 windows')
         assert "in one piece all the same" in str(w.message) and "on the whole view" in str(w.message)
+        # and a cap that no plan can keep is said to be exceeded (the warning let one think tiles would keep it)
+        assert "and will exceed max_memory" in str(w.message)
 
 
 def test_short_memory_runs_in_overlapping_tiles(monkeypatch):

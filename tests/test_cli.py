@@ -370,7 +370,7 @@ def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, 
 
     monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
     params_file = tmp_path / "p.json"
-    params_file.write_text(json.dumps({"n_control_points": 5, "path": {"n_outer": 1}}))
+    params_file.write_text(json.dumps({"n_control_points": 5, "n_times": 8, "path": {"n_outer": 1}}))
     args = ["deblur", str(src), str(tmp_path / "o.npz"), "--params", str(params_file), "--device", "cpu"]
     assert main(args + (["--motion", motion] if motion else [])) == 0
     params = seen["params"]
@@ -383,6 +383,9 @@ def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, 
     saved = meta["saved_metadata"]
     assert saved["motion"] == (motion or "3dof") and saved["napari_lfdeblur_version"] == napari_lfdeblur.__version__
     assert BlindParams.from_dict(saved["parameters"]) == params and saved["preset"] is None  # --params, no preset
+    # the instants it was restored with (final_n_times; it stated the path stage's 8), and the seed
+    assert saved["n_times"] == json.loads((tmp_path / "o.path.json").read_text())["n_times"] == params.final_n_times
+    assert saved["seed"] == 0
 
 
 def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_it(lf_file, tmp_path, monkeypatch,
@@ -428,6 +431,20 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     # every path file states the views it belongs to
     for name in ("p.json", "p_rejected.json", "o.path.json"):
         assert json.loads((tmp_path / name).read_text())["view_shape"] == list(lf.shape[2:4])
+    # a run that rejects nothing removes an earlier run's rejected path (it would pass for this run's)
+    def finds_blur(lf, **kwargs):
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind.BlindResult(lf, rejected, params=kwargs["params"], info={"blur_found": True})
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", finds_blur)
+    assert main(args + ["--overwrite"]) == 0 and not (tmp_path / "o.path_rejected.json").exists()
+    # --path-out may not name the output (the light field became a path file) nor the input
+    before = (tmp_path / "o.npz").stat().st_mtime_ns
+    assert main(args + ["--overwrite", "--path-out", str(tmp_path / "o.npz")]) == 2
+    assert "named for two of this command's outputs" in capsys.readouterr().err
+    assert main(args + ["--overwrite", "--path-out", str(src)]) == 2
+    assert "is the input" in capsys.readouterr().err
+    assert (tmp_path / "o.npz").stat().st_mtime_ns == before and read_lightfield(src).shape == lf.shape
     # a --path-out into a missing folder: refused before the solve, the output left as it was
     before = (tmp_path / "o.npz").stat().st_mtime_ns
     assert main(args + ["--overwrite", "--path-out", str(tmp_path / "no" / "p.json")]) == 2

@@ -164,6 +164,11 @@ def test_choose_regions_spreads_its_windows_one_per_cell():
     assert len(choose_regions(g[:, :, :60], 40, 0.0, n=4)) == 2
     assert choose_regions(g, 40, 0.0, n=1) == [choose_region(g, 40, 0.0)]
     assert choose_regions(g[:, :, :40, :40], 40, 0.0, n=4) == [(0, 0, 40, 40)]
+    # cells that hold a window but not its margin from the view's edges (d_inf != 0): the windows stay in their
+    # cells, disjoint (the margin pushed them into their neighbours'), and the margin is kept where it fits
+    tight = choose_regions(g[:, :, :80, :80], 40, 0.0, margin=3, n=4)
+    assert sorted(tight) == [(0, 0, 40, 40), (0, 40, 40, 40), (40, 0, 40, 40), (40, 40, 40, 40)]
+    assert all(3 <= y0 <= 100 - 43 and 3 <= x0 <= 150 - 43 for y0, x0, _, _ in choose_regions(g, 40, 0.0, 3, 4))
 
 
 def test_blind_on_a_large_view_fits_one_path_to_several_windows():

@@ -106,7 +106,7 @@ def _bar(total: int):
 
 def run_batch(args) -> int:
     """Run ``lfdeblur batch ...``; returns the exit status (0, or 1 when items failed)."""
-    from .cli import CLIError
+    from ._cli_info import CLIError
 
     try:
         return _run(args)

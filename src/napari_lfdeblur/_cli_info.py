@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield", "describe_path",
+__all__ = ["CLIError", "check_targets", "DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield", "describe_path",
            "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note", "stated_value",
            "warn_view_mismatch"]
 
@@ -202,3 +202,26 @@ def result_metadata(kind: str, parameters: dict, **fields) -> dict:
     from . import __version__
 
     return {"kind": kind, **fields, "parameters": dict(parameters), "napari_lfdeblur_version": __version__}
+
+
+class CLIError(Exception):
+    """An error to report to the user as one line."""
+
+
+def check_targets(targets, overwrite: bool, inputs=()) -> None:
+    """Refuse, before any work, an output file (None: none) that exists without ``--overwrite``, or whose
+    folder does not exist (unless that folder is one of the outputs: a folder of views and its path.json);
+    also two outputs of one name, and an output that is one of the ``inputs``."""
+    from .io._common import check_writable
+
+    named = [Path(t).resolve() for t in targets if t is not None]
+    for target in targets:
+        if target is not None and named.count(Path(target).resolve()) > 1:
+            raise CLIError(f"{target} is named for two of this command's outputs (the light field, its path "
+                           "file, --path-out): give each its own name")
+        if target is not None and any(Path(target).resolve() == Path(i).resolve() for i in inputs):
+            raise CLIError(f"{target} is the input; an output may not replace it")
+        if target is not None and target.exists() and not overwrite:
+            raise CLIError(f"{target} exists; pass --overwrite to replace it")  # the option's name, not the API's
+        if target is not None and target.parent not in targets:
+            check_writable(target, overwrite=True)  # its folder exists

@@ -18,6 +18,8 @@ from pathlib import Path
 from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
 from ._cli_info import (
     DEFAULT_N_TIMES,
+    CLIError,
+    check_targets as _check_targets,
     describe,
     describe_lightfield,
     describes,
@@ -30,10 +32,6 @@ from ._cli_types import angular_crop, fraction, gib, seed, value_range, view_gri
 from ._lightfield import MAX_SEED
 
 __all__ = ["main"]
-
-
-class CLIError(Exception):
-    """An error to report to the user as one line."""
 
 
 def _progress(iterable=None, **kwargs):
@@ -61,18 +59,6 @@ def _input_argument(p, help_text="light field file or folder"):
                    help="the stored values that become 0 and 1, such as 0,4095 for 12-bit data in a 16-bit file, "
                    "or auto (the data's own minimum and maximum); default: integers by their type's maximum, "
                    "floats as they are (they must lie in [0, 1])")
-
-
-def _check_targets(targets, overwrite: bool) -> None:
-    """Refuse, before any work, an output file (None: none) that exists without ``--overwrite``, or whose
-    folder does not exist (unless that folder is one of the outputs: a folder of views and its path.json)."""
-    from .io._common import check_writable
-
-    for target in targets:
-        if target is not None and target.exists() and not overwrite:
-            raise CLIError(f"{target} exists; pass --overwrite to replace it")  # the option's name, not the API's
-        if target is not None and target.parent not in targets:
-            check_writable(target, overwrite=True)  # its folder exists
 
 
 def _read(args, **options):
@@ -173,7 +159,7 @@ def _run_simulate(args):
     from .io._write import sidecar_path_json, write_lightfield
 
     out = Path(args.output)
-    _check_targets([out, sidecar_path_json(out)], args.overwrite)
+    _check_targets([out, sidecar_path_json(out)], args.overwrite, [args.input])
     cp, stated = _path_argument(args.path)
     n_times = stated_value(args.n_times, "n_times", [(args.path, stated)], DEFAULT_N_TIMES)
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", [(args.path, stated)], 0.0)
@@ -245,7 +231,7 @@ def _run_deblur(args):
     extra_file = Path(args.path_out) if args.path_out else None
     rejected_file = (extra_file.with_name(extra_file.stem + "_rejected" + extra_file.suffix) if extra_file else
                      out.with_name(out.stem + ".path_rejected.json"))
-    _check_targets([out, path_file, extra_file, rejected_file], args.overwrite)
+    _check_targets([out, path_file, extra_file, rejected_file], args.overwrite, [args.input])
     if args.params:
         if not Path(args.params).is_file():
             raise CLIError(f"parameter file {args.params} does not exist")
@@ -280,10 +266,12 @@ def _run_deblur(args):
     finally:
         gen.close()
         bar.close()
-    fields = dict(n_times=params.n_times, infinity_disparity=d_inf, motion=params.motion)
+    fields = dict(n_times=params.final_n_times, infinity_disparity=d_inf, motion=params.motion)  # as restored
     write_lightfield(out, result.lightfield, overwrite=args.overwrite, control_points=result.control_points,
                      metadata=result_metadata("deblurred (blind)", params.to_dict(), **fields, timings=result.timings,
-                                              preset=None if args.params else args.preset,
+                                              preset=None if args.params else args.preset, seed=args.seed,
+                                              blur_found=result.info.get("blur_found"),
+                                              restoration=result.info.get("restoration"),
                                               final_weight=result.info.get("final_weight"),
                                               path_windows=[list(w) for w in result.info.get("windows", [])]))
     fields["view_shape"] = list(lf.shape[2:4])  # the path files' only (the result's own shape says it)
@@ -295,6 +283,8 @@ def _run_deblur(args):
         save_path_json(rejected_file, result.info["rejected_path"], overwrite=True, **fields)
         print(f"the path it rejected is in {rejected_file}; to restore with it without estimating it again: "
               f"{_deconvolve_command(args, rejected_file)}")
+    elif rejected_file.exists():  # an earlier run's (replaced with --overwrite): it would pass for this run's
+        rejected_file.unlink()
     print(f"wrote {out} {result.lightfield.shape} and its path {path_file}{rotation_note(result.control_points)} "
           f"({result.timings.get('total', float('nan')):.1f} s)")
 
@@ -402,7 +392,8 @@ def _run_deconvolve(args):
     from .progress import run_to_completion
 
     out = Path(args.output)
-    _check_targets([out, sidecar_path_json(out)], args.overwrite)  # the result, and the path it was restored with
+    inputs = [args.input] + ([args.path_json] if args.path_json else [])
+    _check_targets([out, sidecar_path_json(out)], args.overwrite, inputs)  # the result, and its path
     known = None if args.path_json is None else read_path_json(args.path_json)  # before the read: fails fast
     blurred, meta = _read(args)
     if known is None and meta.get("control_points") is None:

@@ -182,7 +182,7 @@ def _deblur(lf, spec: dict, device, meta: dict):
     result = blind_deblur(lf, params=params, infinity_disparity=d_inf, device=device, seed=spec["item_seed"],
                           check_view_order=False)  # read from a file, whose reader checked
     info = result.info
-    extra = {"n_times": params.n_times, "infinity_disparity": d_inf,
+    extra = {"n_times": params.final_n_times, "infinity_disparity": d_inf,  # the instants restored with
              "timings": result.timings, "blur_found": bool(info.get("blur_found", True)),
              "restoration": info.get("restoration", "full")}
     if "message" in info:
@@ -203,8 +203,9 @@ def _recover(spec: dict, out: Path) -> dict:
     """An output that exists but is not in the manifest: keep it if it is this item's, else refuse.
 
     Returns None when the file cannot be read as a light field but the manifest records an output of this
-    item there (``spec['recorded']``: damaged since): the item is redone. Unreadable and unrecorded, it is
-    another file (this package writes atomically), and refused.
+    item there (``spec['recorded']``: damaged since), or when it is this item's output but its path file is
+    gone: the item is redone. Unreadable and unrecorded, it is another file (this package writes atomically),
+    and refused.
     """
     from ..io import LightFieldError, read_lightfield_with_metadata
     from ..io._write import jsonable
@@ -217,7 +218,9 @@ def _recover(spec: dict, out: Path) -> dict:
         raise FileExistsError(f"{out} exists and is not this item's output (it is not a light field: {exc}); "
                               "pass overwrite=True (command line: --overwrite) to replace it") from None
     stated = meta.get("saved_metadata", {})
-    if stated.get("batch") != jsonable(item_metadata(spec)) or not Path(spec["path_json"]).is_file():
+    if stated.get("batch") == jsonable(item_metadata(spec)) and not Path(spec["path_json"]).is_file():
+        return None  # this item's output, its path file lost since: redone
+    if stated.get("batch") != jsonable(item_metadata(spec)):
         raise FileExistsError(f"{out} exists and is not this item's output; pass overwrite=True (command line: "
                               "--overwrite) to replace it")
     verdict = {k: stated[k] for k in ("blur_found", "restoration") if k in stated}

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ._items import item_metadata, item_seed, run_item
-from ._manifest import append_record, check_card, open_manifest, read_manifest, write_card
+from ._manifest import CARD, append_record, check_card, open_manifest, read_manifest, write_card
 
 __all__ = ["BatchReport", "connect", "expand_inputs", "gpu_workers", "run_batch"]
 
@@ -349,7 +349,7 @@ def run_batch(specs: list, out_dir: Path, *, client, workers, device, card: dict
 def _remove_if_unused(out_dir: Path) -> None:
     """Remove a folder this run made when the run failed before writing anything but its card and an empty
     manifest (a cluster that did not start, a scheduler out of reach)."""
-    from ._manifest import CARD, MANIFEST
+    from ._manifest import MANIFEST
 
     entries = {p.name: p for p in out_dir.iterdir()}
     if set(entries) <= {CARD, MANIFEST} and (MANIFEST not in entries or entries[MANIFEST].stat().st_size == 0):
@@ -371,6 +371,7 @@ def _run_in(specs, out_dir: Path, *, client, workers, device, card, callback) ->
                     callback(records[i])
             else:
                 todo.append((i, spec))
+        previous = (out_dir / CARD).read_text(encoding="utf-8") if (out_dir / CARD).is_file() else None
         write_card(out_dir, **card)
         _sweep_temporaries(out_dir, [s for _, s in todo])
         if todo:
@@ -383,8 +384,11 @@ def _run_in(specs, out_dir: Path, *, client, workers, device, card, callback) ->
             finally:  # after an embedded cluster has closed, its workers write nothing more
                 _sweep_temporaries(out_dir, [s for _, s in todo])
         report = BatchReport(out_dir=out_dir, records=records)
-        write_card(out_dir, **card, counts={"ok": report.n_ok, "skipped": report.n_skipped,
-                                            "failed": report.n_failed})
+        if previous is not None and report.n_failed and not report.n_ok + report.n_skipped:
+            (out_dir / CARD).write_text(previous, encoding="utf-8")  # nothing of this run stands: the card stays
+        else:
+            write_card(out_dir, **card, counts={"ok": report.n_ok, "skipped": report.n_skipped,
+                                                "failed": report.n_failed})
     return report
 
 

@@ -107,7 +107,7 @@ from ._alternating import iter_alternating, relay
 from ._disparity import shear
 from ._evidence import evidence_message, iter_verdict
 from ._joint import iter_joint
-from ._memory import TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tiles, within
+from ._memory import TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tiled_peak, tiles, within
 from ._rotation import iter_rotation_fit
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams, RotationFitParams
 from ._windows import check_windows, path_windows, stage_preview
@@ -272,6 +272,10 @@ def iter_blind_deblur(
     """
     arr, d_inf = _validate_input(blurred, infinity_disparity)
     p = _make_params(params, overrides)
+    in_plane = d_inf == 0 and p.method == "alternating" and p.motion == "3dof" and not p.path.estimate_z
+    if p.final is not None and p.final.method == "inplane" and not in_plane:  # it would fail after the path stage
+        raise ValueError("final.method='inplane' restores in-plane paths at infinity_disparity 0 only, and this run "
+                         "may estimate p_z, a rotation or d_inf != 0 (path.estimate_z, motion, method); use 'tv'")
     seed = check_seed(seed)
     windows = check_windows(windows, arr.shape, p)
     cap = check_max_memory(max_memory)
@@ -292,8 +296,12 @@ def iter_blind_deblur(
         have = "max_memory" if cap is not None and available(dev) == cap else f"what {dev} has free"
         how = (f"overlapping tiles of {tile[0]}x{tile[1]}" if tile[0] < Y or tile[1] < X
                else "one piece all the same (a tile would be no smaller than its views)")
+        peak, room = tiled_peak(arr.shape, p, tile), available(dev)
+        over = (f"; even so it needs about {peak / 2**30:.2f} GiB (the path stage, or the result and a tile), and "
+                f"will exceed {have}") if room is not None and peak > room else ""
         warnings.warn(f"blind deblurring needs about {need / 2**30:.2f} GiB, more than {have}: restoring the light "
-                      f"field in {how} (the path is estimated as usual, on {where})", RuntimeWarning, stacklevel=level)
+                      f"field in {how} (the path is estimated as usual, on {where}){over}", RuntimeWarning,
+                      stacklevel=level)
     return devices.run_with_cpu_fallback(lambda d: _run(arr, d_inf, p, d, int(seed), tile, windows), dev)
 
 

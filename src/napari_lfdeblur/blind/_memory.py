@@ -10,7 +10,7 @@ import torch
 from ._params import BlindParams
 from ._region import region_grid
 
-__all__ = ["estimate_blind_memory", "plan_tiles", "plan_run", "check_max_memory", "within", "tiles", "TILE_MARGIN",
+__all__ = ["estimate_blind_memory", "plan_tiles", "plan_run", "tiled_peak", "check_max_memory", "within", "tiles", "TILE_MARGIN",
            "MIN_TILE", "FINAL_TENSORS"]
 
 #: overlap (px) of neighbouring tiles in the final stage, on top of what ``d_inf`` shifts
@@ -53,7 +53,7 @@ def _memory_of_stages(shape, params):
     # x_new, y and two scratch buffers, K x, K y, K x_new, the residual and the gradient (10), the
     # TV prox's dual field (4; its primal and dual norm use FISTA's scratch); and the result, all channels
     group = C if p.final is not None and p.final.couple_channels else 1
-    final = n * 4 * (FINAL_TENSORS * group + C)
+    final = n * 4 * (FINAL_TENSORS * group + C) if p.final is not None else n * 4 * C  # else: the input's copy
     r = p.path.region
     ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
     rows, cols = region_grid(Y, X, r, p.path_windows()) if r and (ny, nx) != (Y, X) else (1, 1)
@@ -98,6 +98,14 @@ def plan_tiles(shape, params: BlindParams | None, free: int | None, result_in_fr
     while side > MIN_TILE and _tile_memory(shape, p, (side, side)) > budget:
         side = max(MIN_TILE, int(side * 0.8))
     return min(Y, side), min(X, side)
+
+
+def tiled_peak(shape, params: BlindParams | None, tile) -> int:
+    """The peak memory estimate (bytes) of a run restored in ``tile`` px tiles: its path stage's (the whole
+    input and the work on the windows), or the full-size result and one tile's work, whichever is larger."""
+    p = params or BlindParams()
+    result = 4 * math.prod(int(v) for v in shape)  # float32, all channels
+    return max(_memory_of_stages(shape, p)[1], result + _tile_memory(shape, p, tile))
 
 
 def _tile_memory(shape, p: BlindParams, tile) -> int:

@@ -137,9 +137,12 @@ def choose_regions(g: torch.Tensor, size: int, disparity_power: float, margin: i
     step = max(1, size // 8)
 
     def corners(n_px, m, a, b):
-        """Corners of an ``m``-px window along an axis of ``n_px``, starting in the cell ``[a, b)``."""
-        lo, hi = (margin, n_px - m - margin) if n_px - m - 2 * margin >= 0 else ((n_px - m) // 2, (n_px - m) // 2)
-        lo, hi = max(lo, min(a, hi)), min(hi, max(b - m, lo))
+        """Corners of an ``m``-px window along an axis of ``n_px``, inside the cell ``[a, b)`` (so that the
+        windows are disjoint) and ``margin`` px from the view's edges, or centred in the cell where it cannot
+        keep the margin (a cell smaller than the window: centred on the view)."""
+        lo, hi = max(a, margin), min(b, n_px - margin) - m
+        if hi < lo:
+            lo = hi = max(0, a + (min(b, n_px) - a - m) // 2) if b - a >= m else max(0, (n_px - m) // 2)
         return np.unique(np.r_[np.arange(lo, hi + 1, step), hi])
 
     rows, cols = region_grid(Y, X, size, n)

@@ -336,7 +336,7 @@ class BlindDeblurWidget(SolverWidget):
         job = self._job
         cp = validate_control_points(result.control_points)
         params = result.params.to_dict() if hasattr(result.params, "to_dict") else dict(result.params)
-        n_times = int(params.get("n_times", 32))
+        n_times = int(params["final_n_times"])  # the instants the result was restored with
         name = f"{job['source']} deblurred (blind)"
         meta = lightfield_metadata(
             kind="blind",
