@@ -1023,7 +1023,7 @@ def test_max_memory_bounds_the_run_by_tiles_and_is_checked(monkeypatch):
         res = blind_deblur(blurred, params=p, device="cpu", max_memory=full * 0.75)
     tile = res.info["tile"]
     assert _memory.MIN_TILE < tile[0] < 160 and tile == _memory.plan_tiles(blurred.shape, p, int(full * 0.75))
-    for bad, error in ((0, ValueError), (-1e9, ValueError), (float("nan"), ValueError), ("4G", TypeError),
+    for bad, error in ((0, ValueError), (0.5, ValueError), (-1e9, ValueError), (float("nan"), ValueError), ("4G", TypeError),
                        (True, TypeError)):
         with pytest.raises(error, match="max_memory"):
             blind_deblur(blurred, params=p, device="cpu", max_memory=bad)

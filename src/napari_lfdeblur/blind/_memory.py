@@ -151,13 +151,13 @@ def plan_run(shape, params: BlindParams | None, device, free_memory):
 
 
 def check_max_memory(max_memory) -> int | None:
-    """``max_memory`` as whole bytes (None stays None); a positive finite number, else an error."""
+    """``max_memory`` as whole bytes (None stays None); a finite number of at least 1 byte, else an error."""
     if max_memory is None:
         return None
     if isinstance(max_memory, bool) or not isinstance(max_memory, numbers.Real):
         raise TypeError(f"max_memory must be a number of bytes or None; got {max_memory!r}")
-    if not math.isfinite(max_memory) or max_memory <= 0:
-        raise ValueError(f"max_memory must be a positive number of bytes; got {max_memory!r}")
+    if not math.isfinite(max_memory) or max_memory < 1:  # 0.5 was a cap of 0 bytes
+        raise ValueError(f"max_memory must be at least 1 byte; got {max_memory!r}")
     return int(max_memory)
 
 
