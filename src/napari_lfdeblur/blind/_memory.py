@@ -10,8 +10,8 @@ import torch
 from ._params import BlindParams
 from ._region import region_grid
 
-__all__ = ["estimate_blind_memory", "plan_tiles", "plan_run", "tiled_peak", "check_max_memory", "within", "tiles", "TILE_MARGIN",
-           "MIN_TILE", "FINAL_TENSORS"]
+__all__ = ["estimate_blind_memory", "plan_tiles", "plan_run", "tiled_peak", "check_max_memory", "within", "tiles",
+           "TILE_MARGIN", "MIN_TILE", "FINAL_TENSORS"]
 
 #: overlap (px) of neighbouring tiles in the final stage, on top of what ``d_inf`` shifts
 TILE_MARGIN = 12

@@ -171,16 +171,26 @@ class SolverWidget(Container):
         replaced (another widget's re-run updates its result layer in place, with the path it was made with)."""
         watched = []
 
-        def rewatch(*_):
+        def changed(*_):  # the layer outlives the widget: once the widget is gone, it lets the layer go
+            if self._gone:
+                forget()
+            else:
+                callback()
+
+        def forget(*_):
             for layer in watched:
-                layer.events.metadata.disconnect(callback)
+                layer.events.metadata.disconnect(changed)
             watched.clear()
+
+        def rewatch(*_):
+            forget()
             if self.layer_combo.value is not None:
                 watched.append(self.layer_combo.value)
-                watched[0].events.metadata.connect(callback)
+                watched[0].events.metadata.connect(changed)
             callback()
 
         self.layer_combo.changed.connect(rewatch)
+        self.native.destroyed.connect(forget)
         rewatch()
 
     def assemble(self, before=(), after=()) -> None:

@@ -24,8 +24,8 @@ from magicgui.widgets import ComboBox, Container, PushButton
 from ...path import MAX_ROTATION, preset_path, random_path
 from ...progress import Progress
 from ..layers import lightfield_layer_data, lightfield_metadata, path_layer_data
-from ._controls import (PathSource, PathTable, device_choice, fill_path, fspin, heading, infinity_disparity_field, spin,
-                        warn_view_mismatch)
+from ._controls import (PathSource, PathTable, device_choice, fill_path, fspin, heading, infinity_disparity_field,
+                        spin, warn_view_mismatch)
 from ._plots import PathPlot
 from ._runner import SolverWidget
 from .epi import EpiPanel
