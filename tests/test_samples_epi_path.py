@@ -306,8 +306,10 @@ def test_path_json_round_trip_and_no_overwrite(tmp_path):
     (tmp_path / "short.json").write_text('{"control_points": [[0, 0, 0]]}')
     with pytest.raises(ValueError, match="at least 2"):
         load_path_json(tmp_path / "short.json")
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match="missing.json does not exist"):
         load_path_json(tmp_path / "missing.json")
+    with pytest.raises(FileNotFoundError, match="is a folder"):  # it said 'does not exist' of an existing folder
+        load_path_json(tmp_path)
     # with its fields: those save_path_json stored, none for a bare list
     from napari_lfdeblur.path import read_path_json
 

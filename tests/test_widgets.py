@@ -149,6 +149,7 @@ def test_simulate_refuses_bad_settings_before_it_runs(make_napari_viewer, lf, no
     w.form.infinity_disparity.value = 19.0  # 5x5 views of 16x16 px: at most 4
     assert w.run() is None and not w.is_running
     assert notifications[-1][0] == "error" and "infinity_disparity = 19 px/view is beyond" in notifications[-1][1]
+    assert w.progress.status.value == "Simulate blur: not started (see the error)"  # not an earlier run's 'done'
     if not torch.cuda.is_available():
         w.form.infinity_disparity.value = 0.0
         w.form.device.value = "cuda"

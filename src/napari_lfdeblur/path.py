@@ -336,7 +336,7 @@ def read_path_json(path) -> tuple[np.ndarray, dict]:
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"path file {path} does not exist")
+        raise FileNotFoundError(f"path file {path} {'is a folder' if path.is_dir() else 'does not exist'}")
     try:
         doc = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

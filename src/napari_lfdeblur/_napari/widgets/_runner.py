@@ -251,6 +251,7 @@ class SolverWidget(Container):
             job = self.make_job(*picked)
         except (ValueError, LayerError) as exc:
             notify_error(f"{self.title}: {exc}")
+            self.progress.status.value = f"{self.title}: not started (see the error)"  # not the last run's 'done'
             return None
         self._cancelled = False
         self._cancel_event = threading.Event()
