@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ._disparity import downsample, shear
 from ._lightfield import check_int, check_number, validate_lightfield
 from .blur import interpolation_matrices
 from .path import bezier_positions, has_rotation, validate_control_points, validate_n_times
@@ -399,9 +400,9 @@ def _agreeing_disparity(arr: np.ndarray) -> float:
     refines twice on the full views, each time 10 times finer.
     """
     V, U, Y, X = arr.shape[:4]
-    g = (arr.mean(axis=-1) if arr.ndim == 5 else arr).astype(np.float64)
+    g = torch.as_tensor((arr.mean(axis=-1) if arr.ndim == 5 else arr).astype(np.float64))[..., None]
     k = max(1, min(Y, X) // SWEEP_PIXELS)
-    small = g[:, :, : Y // k * k, : X // k * k].reshape(V, U, Y // k, k, X // k, k).mean(axis=(3, 5))
+    small = downsample(g, k)
     d_max = max(4.0, 0.35 * min(Y, X) / max((max(U, V) - 1) / 2.0, 0.5)) / k
     cand = np.arange(-d_max, d_max + SWEEP_STEP / 2, SWEEP_STEP)
     best = k * _best_agreement(small, cand[np.abs(cand) > SWEEP_STEP / 2])
@@ -412,16 +413,13 @@ def _agreeing_disparity(arr: np.ndarray) -> float:
     return best
 
 
-def _best_agreement(g: np.ndarray, cand: np.ndarray) -> float:
-    """The candidate disparity whose aligned views (V, U, Y, X) vary least about the image centre."""
-    V, U, Y, X = g.shape
+def _best_agreement(g: torch.Tensor, cand: np.ndarray) -> float:
+    """The candidate disparity whose views (V, U, Y, X, 1), aligned by :func:`shear`, vary least about the
+    image centre."""
+    Y, X = g.shape[2:4]
     yy, xx = np.mgrid[0:Y, 0:X]
-    mask = np.hypot(yy - (Y - 1) / 2.0, xx - (X - 1) / 2.0) <= max(AGREEMENT_RADIUS * min(X, Y), 2.0)
-    scores = []
-    for d in cand:
-        views = [_lerp_shift(_lerp_shift(g[v, u], d * (v - (V - 1) / 2.0), 0), d * (u - (U - 1) / 2.0), 1)[mask]
-                 for v in range(V) for u in range(U)]
-        scores.append(np.var(views, axis=0).mean() if d else np.inf)
+    mask = torch.as_tensor(np.hypot(yy - (Y - 1) / 2.0, xx - (X - 1) / 2.0) <= max(AGREEMENT_RADIUS * min(X, Y), 2.0))
+    scores = [float(shear(g, d).var(dim=(0, 1), unbiased=False)[..., 0][mask].mean()) if d else np.inf for d in cand]
     return float(cand[int(np.argmin(scores))])
 
 
