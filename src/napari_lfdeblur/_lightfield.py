@@ -9,7 +9,7 @@ import sys
 import numpy as np
 
 __all__ = ["check_int", "check_number", "check_seed", "check_infinity_disparity", "validate_lightfield", "brightest",
-           "caller_stacklevel", "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
+           "white_level", "caller_stacklevel", "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
 
 #: A light field whose :func:`brightest` value is below this is dark: the blind solver's salient-edge
 #: weight is absolute, and dark data (10- or 12-bit values in a 16-bit file, a linear decode) show it few edges.
@@ -46,6 +46,12 @@ def brightest(lf) -> float:
     """The 99.9th percentile of the centre view of ``lf`` (V, U, Y, X[, C]), all channels: how bright it gets."""
     lf = np.asarray(lf)
     return float(np.percentile(lf[lf.shape[0] // 2, lf.shape[1] // 2], 99.9))
+
+
+def white_level(dtype) -> float:
+    """The top of the range of data of ``dtype``: its largest value for integers, else 1."""
+    dtype = np.dtype(dtype)
+    return float(np.iinfo(dtype).max) if dtype.kind in "iu" else 1.0
 
 
 def check_number(value, name: str) -> float:

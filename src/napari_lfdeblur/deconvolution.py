@@ -68,7 +68,7 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 import torch
 
-from ._lightfield import check_infinity_disparity, check_int, check_number, validate_lightfield
+from ._lightfield import check_infinity_disparity, check_int, check_number, validate_lightfield, white_level
 from ._params import JsonParams, check_bool
 from .progress import Progress, run_to_completion
 from .blur import BlurOperator, from_tensor, to_tensor, validate_frame
@@ -283,6 +283,11 @@ def _channel_groups(params: DeconvolutionParams, C: int) -> list[slice]:
     return [slice(0, C)] if params.couple_channels else [slice(c, c + 1) for c in range(C)]
 
 
+def _clipped(params: DeconvolutionParams, f: torch.Tensor, white: float) -> bool:
+    """Whether the estimate is held to ``[0, white]``: ``params.clip`` and the input ``f`` lies there."""
+    return params.clip and float(f.min()) >= 0.0 and float(f.max()) <= white
+
+
 def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: DeconvolutionParams, weight, sigma,
              out: np.ndarray, oriented=None, white: float = 1.0):
     """FISTA with a warm-started TV prox for ``1/2 ||K x - f||^2 + w TV4(x)`` (+ box); yields Progress.
@@ -293,10 +298,10 @@ def _iter_tv(op: BlurOperator, f: torch.Tensor, x0: torch.Tensor, params: Deconv
     ``f``, ``x0``: (V, U, Y, X, C); each group's result is written into
     ``out`` (the input's numpy shape), which is returned. ``oriented``: the
     angular differences along the disparity (None: along the view axes).
-    ``white``: the top of the input's range (:func:`_white_level`).
+    ``white``: the top of the input's range (:func:`~napari_lfdeblur._lightfield.white_level`).
     """
     box, saturated = None, False
-    if params.clip and float(f.min()) >= 0.0 and float(f.max()) <= white:
+    if _clipped(params, f, white):
         saturated = params.saturation and float(f.max()) >= white
         box = (0.0, None) if saturated else (0.0, white)  # saturated: clipped to [0, white] once solved
     C = f.shape[-1]
@@ -392,20 +397,15 @@ def iter_deconvolve(
     return _run(arr, cp, n_times, d_inf, p, method, dev, init, frame)
 
 
-def _white_level(arr: np.ndarray) -> float:
-    """The top of a light field's range: its dtype's largest value for integers, else 1."""
-    return float(np.iinfo(arr.dtype).max) if arr.dtype.kind in "iu" else 1.0
-
-
 def _run(arr, cp, n_times, d_inf, p, method, dev, init, frame=None):
     sigma = estimate_noise_sigma(arr) if method == "tv" and p.weight is None else None  # for the weight rule
     weight = p.effective_weight(method, sigma, arr.shape[4] if arr.ndim == 5 else 1)
-    f, white = to_tensor(arr, device=dev), _white_level(arr)
+    f, white = to_tensor(arr, device=dev), white_level(arr.dtype)
     if method == "inplane":
         M = inplane_matrix(cp, arr.shape[0], arr.shape[1], n_times=n_times)
         with torch.no_grad():
             x = solve_inplane(f, M, weight)
-            if p.clip and float(f.min()) >= 0.0 and float(f.max()) <= white:
+            if _clipped(p, f, white):
                 x.clamp_(0.0, white)
         out = from_tensor(x, arr.ndim)
         yield Progress(stage="inplane", iteration=1, n_iterations=1, info={"weight": weight, "method": method},

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._lightfield import white_level
 from ._common import LightFieldFormatError, LightFieldReadError
 from ._png import PNGError, needs_own_decoder, png_header, read_png16
 
@@ -30,8 +31,7 @@ def _squeeze_channels(img: np.ndarray, path) -> np.ndarray:
 def drop_opaque_alpha(img: np.ndarray) -> np.ndarray:
     """``img`` (one image or a stack, channels last) without its alpha channel when that is opaque everywhere."""
     if img.ndim >= 3 and img.shape[-1] == 4:
-        top = np.iinfo(img.dtype).max if np.issubdtype(img.dtype, np.integer) else 1.0
-        if np.all(img[..., 3] == top):
+        if np.all(img[..., 3] == white_level(img.dtype)):
             return img[..., :3]
     return img
 
