@@ -56,6 +56,12 @@ def test_simulate_with_json_path_and_no_overwrite(lf_file, tmp_path, capsys):
     assert main(args) == 2  # exists: refused, file untouched
     assert "exists" in capsys.readouterr().err
     assert out.read_bytes() == before
+    # an output that is the input is refused, --overwrite or not (simulate and deconvolve alike)
+    kept = src.read_bytes()
+    assert main(["simulate", str(src), str(src), "--path", str(tmp_path / "path.json"), "--overwrite"]) == 2
+    assert "is the input; an output may not replace it" in capsys.readouterr().err
+    assert main(["deconvolve", str(out), str(tmp_path / "path.json"), str(out), "--overwrite"]) == 2
+    assert "is the input" in capsys.readouterr().err and src.read_bytes() == kept and out.read_bytes() == before
 
 
 def test_a_path_for_views_of_another_size_is_warned_about(lf_file, tmp_path, capsys):

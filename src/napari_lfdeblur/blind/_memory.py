@@ -156,7 +156,7 @@ def check_max_memory(max_memory) -> int | None:
         return None
     if isinstance(max_memory, bool) or not isinstance(max_memory, numbers.Real):
         raise TypeError(f"max_memory must be a number of bytes or None; got {max_memory!r}")
-    if not math.isfinite(max_memory) or max_memory < 1:  # 0.5 was a cap of 0 bytes
+    if not math.isfinite(max_memory) or max_memory < 1:  # a fraction of a byte would be a cap of 0
         raise ValueError(f"max_memory must be at least 1 byte; got {max_memory!r}")
     return int(max_memory)
 
