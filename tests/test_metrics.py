@@ -55,6 +55,8 @@ def test_psnr_and_ssim_reject_bad_input():
         psnr(b, a)
     with pytest.raises(ValueError, match="6D"):
         psnr(np.zeros((1,) * 6), np.zeros((1,) * 6))
+    with pytest.raises(ValueError, match="give data_range"):  # integer against float: which range?
+        psnr(a.astype(np.uint8), a)
     for metric in (psnr, ssim):  # a string was compared with 0 ('>' not supported)
         with pytest.raises(TypeError, match="data_range must be a number; got '1'"):
             metric(a, a + 0.1, data_range="1")
@@ -185,3 +187,23 @@ def test_path_error_rejects_bad_paths():
         path_error(np.zeros((3, 2)), np.zeros((2, 3)))
     with pytest.raises(ValueError, match="n_times"):
         path_error(np.zeros((2, 3)), np.zeros((2, 3)), n_times=1)
+
+
+def test_integer_inputs_are_scored_on_their_dtypes_range():
+    rng = np.random.default_rng(0)
+    ref = rng.integers(0, 256, (3, 3, 16, 16)).astype(np.uint8)
+    est = np.clip(ref.astype(int) + rng.integers(-3, 4, ref.shape), 0, 255).astype(np.uint8)
+    mse = np.mean((est.astype(float) - ref) ** 2)
+    assert psnr(est, ref) == pytest.approx(10 * np.log10(255.0**2 / mse))  # was scored on [0, 1]: about -22 dB
+    assert psnr(est, ref) == pytest.approx(psnr(est / 255.0, ref / 255.0))
+    assert ssim(est, ref) == pytest.approx(ssim(est / 255.0, ref / 255.0))
+    wide = ref.astype(np.uint16)
+    assert psnr(wide, wide + 1) == pytest.approx(10 * np.log10(65535.0**2))
+
+
+def test_non_finite_points_and_infinity_disparity_are_refused():
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        chamfer_distance([[np.nan, 0.0]], [[0.0, 0.0]])
+    cp = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+    with pytest.raises(ValueError, match="infinity_disparity must be finite"):
+        path_error(cp, cp, infinity_disparity=float("nan"))

@@ -72,6 +72,21 @@ def test_synthetic_scene_bad_input():
         synthetic_scene((5, 5, 32))
     with pytest.raises(ValueError, match="n_layers"):
         synthetic_scene((5, 5, 8, 8), n_layers=0)
+    with pytest.raises(TypeError, match="n_layers"):
+        synthetic_scene((5, 5, 8, 8), n_layers=2.5)
+    with pytest.raises(ValueError, match="shape"):
+        synthetic_scene((5, 5, 8.7, 8))  # was truncated to 8
+    # the farther layer first: the other way round, it would occlude the nearer one
+    with pytest.raises(ValueError, match="farthest layer's disparity first"):
+        synthetic_scene((3, 3, 32, 32), n_layers=2, disparity_range=(2.0, -1.0))
+    with pytest.raises(ValueError, match="finite"):
+        synthetic_scene((3, 3, 32, 32), disparity_range=(float("nan"), 1.0))
+    with pytest.raises(ValueError, match="two numbers"):
+        synthetic_scene((3, 3, 32, 32), disparity_range=(1.0,))
+    with pytest.raises(ValueError, match="more than half the view"):  # was a MemoryError
+        synthetic_scene((3, 3, 32, 32), disparity_range=(0.0, 1e4))
+    with pytest.raises(ValueError, match="seed"):
+        synthetic_scene((3, 3, 8, 8), seed=-1)
 
 
 def test_the_shipped_sample_file_opens_as_itself():

@@ -8,8 +8,8 @@ import sys
 
 import numpy as np
 
-__all__ = ["check_int", "check_number", "check_seed", "check_infinity_disparity", "validate_lightfield", "brightest",
-           "white_level", "caller_stacklevel", "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
+__all__ = ["check_int", "check_view_grid", "check_number", "check_seed", "check_infinity_disparity",
+           "validate_lightfield", "brightest", "white_level", "caller_stacklevel", "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
 
 #: A light field whose :func:`brightest` value is below this is dark: the blind solver's salient-edge
 #: weight is absolute, and dark data (10- or 12-bit values in a 16-bit file, a linear decode) show it few edges.
@@ -101,6 +101,18 @@ def check_infinity_disparity(infinity_disparity, shape) -> float:
             f"would be shifted by {abs(d_inf) * half:g} px, more than half the view; |infinity_disparity| must "
             f"be at most {min(Y, X) / (2.0 * half):g}")
     return d_inf
+
+
+def check_view_grid(shape) -> tuple:
+    """``(V, U, Y, X)`` of a light field to make, as four ints (ValueError unless four positive integers)."""
+    try:
+        entries = list(shape)
+    except TypeError:
+        entries = []
+    if len(entries) != 4 or not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) and s >= 1
+                                    for s in entries):
+        raise ValueError(f"shape must be (V, U, Y, X) of positive integers; got {shape!r}")
+    return tuple(int(s) for s in entries)
 
 
 def check_int(value, name: str, minimum: int | None = None) -> int:

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ._lightfield import check_number
+from ._lightfield import check_number, white_level
 from .path import bezier_positions, validate_control_points, validate_n_times
 
 __all__ = [
@@ -83,15 +83,18 @@ def _pair(estimate, reference, crop) -> tuple[np.ndarray, np.ndarray]:
 # ------------------------------------------------------------ image metrics
 
 
-def psnr(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> float:
+def psnr(estimate, reference, *, data_range: float | None = None, crop: int = 0) -> float:
     """Peak signal-to-noise ratio in dB, ``10 log10(data_range^2 / MSE)``.
 
     Parameters
     ----------
     estimate, reference : ndarray
         Same shape: a light field ``(V, U, Y, X[, C])`` or an image ``(Y, X[, C])``.
-    data_range : float, default 1.0
-        The intensity range (1 for light fields in [0, 1]).
+    data_range : float, optional
+        The intensity range. Default: 1 for floating-point inputs (light
+        fields in [0, 1]), the dtype's largest value for integer inputs (255
+        for uint8); inputs of two different dtypes, one of them integer,
+        need it given.
     crop : int, default 0
         Pixels removed from each spatial border before comparing.
 
@@ -100,23 +103,32 @@ def psnr(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> floa
     float
         The PSNR over all views, pixels and channels; ``inf`` when they are equal.
     """
+    data_range = _data_range(data_range, estimate, reference)
     est, ref = _pair(estimate, reference, crop)
-    data_range = _data_range(data_range)
     mse = float(np.mean((est - ref) ** 2))
     if mse == 0.0:
         return float("inf")
     return float(10.0 * np.log10(float(data_range) ** 2 / mse))
 
 
-def _data_range(value) -> float:
-    """``data_range`` as a positive float (TypeError for a non-number, ValueError when not positive)."""
+def _data_range(value, estimate, reference) -> float:
+    """``data_range`` as a positive float (TypeError for a non-number, ValueError when not positive).
+
+    None: the top of the inputs' range (:func:`white_level` of their dtype), when they agree on it.
+    """
+    if value is None:
+        levels = {white_level(np.asarray(a).dtype) for a in (estimate, reference)}
+        if len(levels) > 1:
+            raise ValueError(f"estimate ({np.asarray(estimate).dtype}) and reference ({np.asarray(reference).dtype}) "
+                             f"have different ranges: give data_range")
+        return levels.pop()
     value = check_number(value, "data_range")
     if not value > 0:
         raise ValueError(f"data_range must be positive; got {value!r}")
     return value
 
 
-def ssim(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> float:
+def ssim(estimate, reference, *, data_range: float | None = None, crop: int = 0) -> float:
     """Structural similarity, the mean over views and channels.
 
     Each view (and each colour channel) is compared as a 2D image with
@@ -128,7 +140,8 @@ def ssim(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> floa
     ----------
     estimate, reference : ndarray
         Same shape: a light field ``(V, U, Y, X[, C])`` or an image ``(Y, X[, C])``.
-    data_range : float, default 1.0
+    data_range : float, optional
+        The intensity range, as in :func:`psnr`.
     crop : int, default 0
         Pixels removed from each spatial border before comparing.
 
@@ -139,6 +152,7 @@ def ssim(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> floa
     """
     from skimage.metrics import structural_similarity
 
+    data_range = _data_range(data_range, estimate, reference)
     est, ref = _pair(estimate, reference, crop)
     ay, ax = _spatial_axes(est.ndim)
     win = min(7, est.shape[ay], est.shape[ax])
@@ -152,7 +166,7 @@ def ssim(estimate, reference, *, data_range: float = 1.0, crop: int = 0) -> floa
     est = est.reshape(-1, est.shape[-2], est.shape[-1])
     ref = ref.reshape(-1, ref.shape[-2], ref.shape[-1])
     values = [
-        structural_similarity(e, r, data_range=_data_range(data_range), win_size=win)
+        structural_similarity(e, r, data_range=data_range, win_size=win)
         for e, r in zip(est, ref)
     ]
     return float(np.mean(values))
@@ -264,11 +278,18 @@ def chamfer_distance(a, b) -> float:
     Returns
     -------
     float
+
+    Raises
+    ------
+    ValueError
+        If the sets are empty, of different ``D``, or hold NaN or Inf.
     """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or len(a) == 0 or len(b) == 0:
         raise ValueError(f"point sets must be non-empty (N, D) arrays of equal D; got {a.shape} and {b.shape}")
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        raise ValueError("point sets contain NaN or Inf")
     d = np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1))
     return float(0.5 * (d.min(axis=1).mean() + d.min(axis=0).mean()))
 
@@ -315,6 +336,7 @@ def path_error(
     PathError
     """
     n_times = validate_n_times(n_times)
+    infinity_disparity = check_number(infinity_disparity, "infinity_disparity")
     est = bezier_positions(validate_control_points(estimated_cp), n_times)[:, :3]
     true = bezier_positions(validate_control_points(true_cp), n_times)[:, :3]
     est = est - est.mean(axis=0)

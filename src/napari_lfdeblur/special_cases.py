@@ -108,19 +108,6 @@ def solve_inplane(f: torch.Tensor, M: np.ndarray, weight: float) -> torch.Tensor
 # ---------------------------------------------------------------- refocus
 
 
-def _lerp_shift(img: np.ndarray, shift: float, axis: int) -> np.ndarray:
-    """``out[i] = img[i + shift]`` along ``axis``, bilinear, replicate boundary."""
-    n = img.shape[axis]
-    c = np.clip(np.arange(n, dtype=np.float64) + shift, 0.0, n - 1.0)
-    i0 = np.clip(np.floor(c).astype(np.int64), 0, max(n - 2, 0))
-    i1 = np.minimum(i0 + 1, n - 1)
-    w = c - i0
-    shape = [1] * img.ndim
-    shape[axis] = n
-    w = w.reshape(shape)
-    return np.take(img, i0, axis=axis) * (1.0 - w) + np.take(img, i1, axis=axis) * w
-
-
 def refocus(lf, disparity: float) -> np.ndarray:
     """Shift-and-sum refocusing with sub-pixel shifts.
 
@@ -142,14 +129,9 @@ def refocus(lf, disparity: float) -> np.ndarray:
     """
     arr = validate_lightfield(lf).astype(np.float64, copy=False)
     d = check_number(disparity, "disparity")
-    V, U = arr.shape[:2]
-    acc = np.zeros(arr.shape[2:], dtype=np.float64)
-    for v in range(V):
-        for u in range(U):
-            view = arr[v, u]
-            shifted = _lerp_shift(view, d * (v - (V - 1) / 2.0), 0) if d else view
-            acc += _lerp_shift(shifted, d * (u - (U - 1) / 2.0), 1) if d else shifted
-    return (acc / (V * U)).astype(np.float32)
+    t = torch.as_tensor(arr if arr.ndim == 5 else arr[..., None])
+    out = (shear(t, d) if d else t).mean(dim=(0, 1)).numpy()
+    return (out if arr.ndim == 5 else out[..., 0]).astype(np.float32)
 
 
 # ------------------------------------------------- textured plane (Sec. 3.2.2)

@@ -9,6 +9,8 @@ import numbers
 import numpy as np
 from scipy import ndimage
 
+from .._lightfield import check_infinity_disparity, check_seed, check_view_grid
+
 __all__ = ["procedural_scene", "TEXTURE_IMAGES"]
 
 #: the ``skimage.data`` images the textures are cut from (all ship with scikit-image)
@@ -119,14 +121,11 @@ def _deltas(rng, n_layers: int) -> np.ndarray:
 
 
 def _check(shape, seed, infinity_disparity, n_layers):
-    if not isinstance(shape, (tuple, list)) or len(shape) != 4:
-        raise ValueError(f"shape must be (V, U, Y, X); got {shape!r}")
-    if not all(isinstance(s, numbers.Integral) and s >= 1 for s in shape):
-        raise ValueError(f"shape must hold positive integers; got {shape!r}")
-    if not isinstance(seed, numbers.Integral) or isinstance(seed, bool):
-        raise TypeError(f"seed must be an int; got {type(seed).__name__}")
+    shape = check_view_grid(shape)
+    check_seed(seed)
     if not isinstance(infinity_disparity, numbers.Real) or not math.isfinite(infinity_disparity):
         raise ValueError(f"infinity_disparity must be a finite number; got {infinity_disparity!r}")
+    check_infinity_disparity(infinity_disparity, shape)
     if n_layers is not None and (not isinstance(n_layers, numbers.Integral) or n_layers < 1):
         raise ValueError(f"n_layers must be a positive int or None; got {n_layers!r}")
 
@@ -151,7 +150,11 @@ def procedural_scene(
     (bilinear sampling of each plane, soft alpha edges composited back to
     front), so occlusion and disocclusion are right in every view. The scene
     depends on the seed, the view size and ``color``; ``infinity_disparity``
-    only moves all of it in depth.
+    moves all of it in depth. One thing more depends on the border the views
+    need (which grows with ``infinity_disparity`` and the number of views):
+    a texture drawn low in contrast keeps its mean level over the view and
+    that border, so its level can differ by a few hundredths between two
+    such calls.
 
     Disparities are physical for ``infinity_disparity = d_inf``: every point is
     nearer than infinity, so plane ``i`` has disparity ``d_inf + delta_i`` with
@@ -184,7 +187,9 @@ def procedural_scene(
     Raises
     ------
     ValueError
-        On a malformed shape, a non-finite ``infinity_disparity`` or a bad ``n_layers``.
+        On a malformed shape, a bad ``n_layers``, a seed outside ``0 .. 2**63 - 1``, or an
+        ``infinity_disparity`` that is not finite or beyond the bound of
+        :func:`~napari_lfdeblur.simulate_blur` (``|d_inf| (max(V, U) - 1) / 2 <= min(Y, X) / 2``).
     TypeError
         When ``seed`` is not an int.
 
@@ -201,7 +206,7 @@ def procedural_scene(
     True
     """
     _check(shape, seed, infinity_disparity, n_layers)
-    V, U, Y, X = (int(s) for s in shape)
+    V, U, Y, X = check_view_grid(shape)
     d_inf = float(infinity_disparity)
     rng = np.random.default_rng([seed, 0x1F5CE])
     n = int(rng.integers(3, 7)) if n_layers is None else int(n_layers)

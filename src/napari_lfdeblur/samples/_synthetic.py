@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from .._lightfield import check_infinity_disparity, check_int, check_number, check_seed, check_view_grid
+
 __all__ = ["synthetic_scene"]
 
 
@@ -42,6 +44,25 @@ def _mask(rng, height, width):
     return ndimage.gaussian_filter(mask.astype(float), sigma=0.6)
 
 
+def _check_disparity_range(disparity_range, shape):
+    """``(d_far, d_near)`` as floats: two finite numbers, the farthest first, each within the bound."""
+    try:
+        d_far, d_near = disparity_range
+    except (TypeError, ValueError):
+        raise ValueError(f"disparity_range must be two numbers (farthest, nearest); got {disparity_range!r}") from None
+    d_far, d_near = (check_number(d, "disparity_range") for d in (d_far, d_near))
+    if d_far > d_near:
+        raise ValueError(f"disparity_range must give the farthest layer's disparity first (a nearer layer has the "
+                         f"larger disparity); got {disparity_range!r}")
+    for d in (d_far, d_near):
+        try:
+            check_infinity_disparity(d, shape)
+        except ValueError:
+            raise ValueError(f"disparity_range: {d:g} px/view would shift the outermost views by more than half "
+                             f"the view ({shape[2]} x {shape[3]})") from None
+    return d_far, d_near
+
+
 def synthetic_scene(
     shape=(9, 9, 64, 64),
     n_layers: int = 3,
@@ -67,9 +88,12 @@ def synthetic_scene(
         RGB output ``(V, U, Y, X, 3)`` instead of grayscale.
     seed : int or None, default 0
         Seed of the random textures, shapes and disparities.
-    disparity_range : (float, float)
-        Disparities of the farthest and the nearest layer, px/view; the
-        layers in between are evenly spaced.
+    disparity_range : (float, float), default (0.25, 1.5)
+        Disparities of the farthest and the nearest layer, px/view, the
+        farthest first (a nearer layer has the larger disparity); the
+        layers in between are evenly spaced. Each within the bound of
+        :func:`~napari_lfdeblur.simulate_blur`'s ``infinity_disparity``,
+        ``|d| (max(V, U) - 1) / 2 <= min(Y, X) / 2``.
 
     Returns
     -------
@@ -79,20 +103,25 @@ def synthetic_scene(
         Ground-truth disparity of the centre view (px/view, docs/model.md sign:
         a point at ``x`` in view ``u`` is at ``x + d`` in view ``u + 1``).
 
+    Raises
+    ------
+    ValueError
+        On a malformed shape, ``n_layers < 1``, a seed outside ``0 .. 2**63 - 1``, or a
+        ``disparity_range`` that is not two finite numbers, farthest first, within the bound.
+    TypeError
+        When ``n_layers`` or ``seed`` is not an integer, or a disparity not a number.
+
     Examples
     --------
     >>> lf, disp = synthetic_scene((5, 5, 32, 32), n_layers=2, seed=1)
     >>> lf.shape, disp.shape
     ((5, 5, 32, 32), (32, 32))
     """
-    if len(shape) != 4 or min(shape) < 1:
-        raise ValueError(f"shape must be (V, U, Y, X) of positive sizes; got {shape}")
-    if n_layers < 1:
-        raise ValueError(f"n_layers must be at least 1; got {n_layers}")
-    V, U, Y, X = (int(s) for s in shape)
-    rng = np.random.default_rng(seed)
+    V, U, Y, X = check_view_grid(shape)
+    n_layers = check_int(n_layers, "n_layers", 1)
+    rng = np.random.default_rng(None if seed is None else check_seed(seed))
     channels = 3 if color else 1
-    d_far, d_near = (float(d) for d in disparity_range)
+    d_far, d_near = _check_disparity_range(disparity_range, (V, U, Y, X))
     disparities = np.linspace(d_far, d_near, n_layers) if n_layers > 1 else np.array([d_far])
 
     vc = np.arange(V) - (V - 1) / 2
