@@ -7,7 +7,7 @@ import torch
 
 from napari_lfdeblur import _memory
 from napari_lfdeblur._memory import host_available_memory, release_host_memory
-from napari_lfdeblur.devices import free_memory, select_device
+from napari_lfdeblur.devices import empty_cache, free_memory, select_device
 
 
 def test_select_device():
@@ -18,6 +18,44 @@ def test_select_device():
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match="no CUDA"):
             select_device("cuda")
+    # a torch.device is checked like its name (it was returned as is, to fail later inside torch)
+    for kind in ("meta", "mps"):
+        with pytest.raises(ValueError, match="unknown device"):
+            select_device(torch.device(kind))
+    assert select_device(torch.device("cpu")) == torch.device("cpu")
+
+
+def test_cuda_index_must_be_a_gpu_present(monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    assert select_device("cuda:1") == torch.device("cuda:1")
+    assert select_device("cuda") == torch.device("cuda")
+    with pytest.raises(ValueError, match="'cuda:2' was asked for, but torch sees 2 CUDA GPU"):
+        select_device("cuda:2")
+
+
+def test_empty_cache_takes_a_device_name():
+    empty_cache("cpu")  # a no-op; it needed a torch.device
+    empty_cache(torch.device("cpu"))
+
+
+def test_blur_operator_refuses_other_dtypes_and_devices():
+    from napari_lfdeblur.blur import BlurOperator
+
+    cp = [[-1.5, 0.0, 0.0], [1.5, 0.0, 0.0]]
+    with pytest.raises(TypeError, match="floating-point torch dtype"):  # truncated the path to whole views
+        BlurOperator((3, 3, 8, 8), cp, n_times=4, dtype=torch.int32)
+    with pytest.raises(TypeError, match="floating-point torch dtype"):
+        BlurOperator((3, 3, 8, 8), cp, n_times=4, dtype="float32")
+    op = BlurOperator((3, 3, 8, 8), cp, n_times=4, device="cpu")
+    x = torch.rand(3, 3, 8, 8, 1)
+    with pytest.raises(TypeError, match="dtype torch.float32"):  # an integer tensor came out all zeros
+        op.forward((100 * x).to(torch.int32))
+    with pytest.raises(TypeError, match="dtype torch.float32"):
+        op.adjoint(x.double())
+    with pytest.raises(ValueError, match="the tensor is on meta, the operator on cpu"):
+        op.forward(x.to("meta"))
+    assert op.forward(x).dtype == torch.float32
 
 
 @pytest.mark.skipif(not Path("/proc/meminfo").exists(), reason="needs /proc/meminfo")

@@ -29,7 +29,8 @@ def select_device(device: str | torch.device | None = "auto") -> torch.device:
     Raises
     ------
     ValueError
-        If the name is not known, or CUDA is asked for and not available.
+        If the name (or the ``torch.device``'s type) is not known, or CUDA is
+        asked for and not available, or its index is not one of the GPUs present.
     """
     if device is None or (isinstance(device, str) and device == "auto"):
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -40,15 +41,18 @@ def select_device(device: str | torch.device | None = "auto") -> torch.device:
             dev = torch.device(str(device))
         except RuntimeError:
             dev = None
-        if dev is None or dev.type not in _CHOICES:
-            raise ValueError(
-                f"unknown device {device!r}: choose one of 'auto', 'cpu', 'cuda'"
-            )
+    if dev is None or dev.type not in _CHOICES:
+        raise ValueError(
+            f"unknown device {device!r}: choose one of 'auto', 'cpu', 'cuda'"
+        )
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise ValueError(
             "device 'cuda' was asked for, but no CUDA GPU is available to torch; "
             "use device='auto' or 'cpu'"
         )
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise ValueError(f"device {str(dev)!r} was asked for, but torch sees {torch.cuda.device_count()} CUDA GPU(s), "
+                         f"numbered from 0")
     return dev
 
 
@@ -65,8 +69,9 @@ def free_memory(device: str | torch.device | None = "auto") -> int | None:
     return host_available_memory()
 
 
-def empty_cache(device: torch.device) -> None:
-    """Release cached GPU memory and cuBLAS workspaces (a no-op on the CPU)."""
+def empty_cache(device: str | torch.device) -> None:
+    """Release cached GPU memory and cuBLAS workspaces (a no-op on the CPU); ``device`` as for :func:`select_device`."""
+    device = torch.device(device)
     if device.type == "cuda" and torch.cuda.is_available():  # pragma: no cover - needs a GPU
         torch.cuda.synchronize(device)
         clear = getattr(torch._C, "_cuda_clearCublasWorkspaces", None)  # held by the caching allocator
@@ -88,8 +93,9 @@ def run_with_cpu_fallback(run, device: torch.device):
     ----------
     run : callable
         ``run(device)`` returns a solver generator.
-    device : torch.device
+    device : str or torch.device
     """
+    device = torch.device(device)
     try:
         result = yield from run(device)
         return result
