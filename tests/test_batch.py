@@ -496,3 +496,45 @@ def test_cli_batch_refuses_before_it_starts(inputs, tmp_path, capsys):
     assert "--n-per-input must be >= 1; got 0" in capsys.readouterr().err and not out.exists()
     assert main(["batch", "deblur", pattern, str(tmp_path / "in")]) == 2  # into the inputs' own folder
     assert "would replace it: choose another output folder" in capsys.readouterr().err
+
+
+def test_a_run_refused_for_its_device_leaves_the_dataset_card(client, inputs, tmp_path):
+    from napari_lfdeblur.batch._run import CARD
+
+    out = tmp_path / "ds"
+    simulate_dataset(inputs[:1], out, client=client, device="cpu", n_times=4, seed=0)
+    card = (out / CARD).read_text()
+    # no worker offers a GPU: refused before any item, and the card still describes the items there
+    with pytest.raises(ValueError, match="no worker offers the resource GPU"):
+        simulate_dataset(inputs[:1], out, client=client, device="cuda", n_times=8, seed=5)
+    assert (out / CARD).read_text() == card
+    with pytest.raises(ValueError, match="no worker offers the resource GPU"):
+        simulate_dataset(inputs[:1], tmp_path / "new", client=client, device="cuda")
+    assert not (tmp_path / "new" / CARD).exists()
+
+
+def test_a_deblurred_item_records_the_device_it_ran_on(monkeypatch, inputs, tmp_path):
+    from napari_lfdeblur import blind
+    from napari_lfdeblur.batch import _items
+
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)  # asked for the GPU, which fell back to the CPU
+
+    def fell_back(lf, **kwargs):
+        assert str(kwargs["device"]) == "cuda"
+        return blind.BlindResult(np.asarray(lf, np.float32), np.zeros((4, 3)), info={"device": "cpu"})
+
+    monkeypatch.setattr(blind, "blind_deblur", fell_back)
+    from napari_lfdeblur.batch._run import make_spec
+
+    spec = make_spec("deblur", inputs[0], 0, tmp_path / "a.npz", parameters={"params": json.loads(TINY.to_json()),
+                     "infinity_disparity": 0.0}, seed=0, overwrite=False, version="test")
+    spec["device"] = "cuda"
+    n = torch.get_num_threads()
+    try:
+        rec = _items.run_item(spec)
+    finally:
+        torch.set_num_threads(n)  # a worker's setting
+    assert rec["status"] == "ok", rec.get("error")
+    assert rec["device"] == "cpu"  # where it ran, not what was asked for

@@ -182,7 +182,8 @@ def _deblur(lf, spec: dict, device, meta: dict):
     result = blind_deblur(lf, params=params, infinity_disparity=d_inf, device=device, seed=spec["item_seed"],
                           check_view_order=False)  # read from a file, whose reader checked
     info = result.info
-    extra = {"n_times": params.final_n_times, "infinity_disparity": d_inf,  # the instants restored with
+    extra = {"device": info.get("device", str(device)),  # where it ran: the GPU may have fallen back to the CPU
+             "n_times": params.final_n_times, "infinity_disparity": d_inf,  # the instants restored with
              "timings": result.timings, "blur_found": bool(info.get("blur_found", True)),
              "restoration": info.get("restoration", "full")}
     if "message" in info:
@@ -282,6 +283,7 @@ def _run(spec: dict, out: Path, rec: dict) -> None:
             compute = _simulate if spec["kind"] == "simulate" else _deblur
             lf, meta = read_lightfield_with_metadata(spec["input"], value_range=spec["parameters"].get("value_range"))
             result, cp, extra = compute(lf, spec, device, meta)
+            rec["device"] = extra.pop("device", rec["device"])
             save_path_json(spec["path_json"], cp, overwrite=True, **extra, view_shape=lf.shape[2:4],
                            lightfield=out.name)
             # what the file states of its blur (read back, as by deconvolve and deblur) and of the verdict

@@ -381,6 +381,13 @@ def _run_in(specs, out_dir: Path, *, client, workers, device, card, callback) ->
                     for _, spec in todo:
                         spec["device"] = "cuda" if use_gpu else "cpu"
                     _collect(c, todo, {"GPU": 1} if use_gpu else None, manifest, callback, records)
+            except BaseException:
+                if all(records[i] is None for i, _ in todo):  # refused, or stopped before any item: the card stays
+                    if previous is None:
+                        (out_dir / CARD).unlink(missing_ok=True)
+                    else:
+                        (out_dir / CARD).write_text(previous, encoding="utf-8")
+                raise
             finally:  # after an embedded cluster has closed, its workers write nothing more
                 _sweep_temporaries(out_dir, [s for _, s in todo])
         report = BatchReport(out_dir=out_dir, records=records)
