@@ -597,3 +597,26 @@ def test_running_out_of_memory_is_one_line(lf_file, tmp_path, capsys, monkeypatc
     assert main(["simulate", str(src), str(tmp_path / "b.npz"), "--path", "linear:2"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "error: out of memory (Unable to allocate 119. GiB" in err
+
+
+def test_the_gpu_running_out_of_memory_is_one_line(lf_file, tmp_path, capsys, monkeypatch):
+    import torch
+
+    import napari_lfdeblur.cli as cli
+
+    def simulate(args):  # torch's error is a RuntimeError, which the command did not catch
+        raise torch.cuda.OutOfMemoryError("CUDA out of memory. Tried to allocate 20.00 GiB\nmore lines")
+
+    monkeypatch.setattr(cli, "_run_simulate", simulate)
+    _, src = lf_file
+    assert main(["simulate", str(src), str(tmp_path / "d.npz"), "--path", "linear:2"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error: the GPU ran out of memory (CUDA out of memory. Tried" in err
+    assert "--device cpu" in err
+
+    def broken(args):  # any other RuntimeError is a bug: its traceback stays
+        raise RuntimeError("something else")
+
+    monkeypatch.setattr(cli, "_run_simulate", broken)
+    with pytest.raises(RuntimeError, match="something else"):
+        main(["simulate", str(src), str(tmp_path / "d.npz"), "--path", "linear:2"])

@@ -480,9 +480,14 @@ def main(argv=None) -> int:
     except (CLIError, ValueError, TypeError, OSError) as exc:
         print(f"lfdeblur {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except MemoryError as exc:  # numpy's names the array it could not allocate
-        print(f"lfdeblur {args.command}: error: out of memory ({exc or 'the work does not fit'}); try a smaller "
-              "input, fewer instants (--n-times) or, for deblur, --max-memory", file=sys.stderr)
+    except (MemoryError, RuntimeError) as exc:  # numpy's names the array it could not allocate
+        gpu = type(exc).__name__ == "OutOfMemoryError"  # torch's, a RuntimeError: the GPU's memory
+        if isinstance(exc, RuntimeError) and not gpu:
+            raise
+        what = (str(exc).splitlines() or [""])[0] or "the work does not fit"
+        print(f"lfdeblur {args.command}: error: {'the GPU ran ' if gpu else ''}out of memory ({what}); try "
+              f"{'--device cpu, ' if gpu else ''}a smaller input, fewer instants (--n-times) or, for deblur, "
+              "--max-memory", file=sys.stderr)
         return 1
     return status or 0
 
