@@ -40,10 +40,15 @@ def machine(device: str | None = None) -> str:
     Parameters
     ----------
     device : str, optional
-        The torch device the benchmark ran on (``'cpu'``, ``'cuda'``, ``'cuda:0'``); a CUDA
-        device is named by its model.
+        The torch device the benchmark ran on (``'cpu'``, ``'cuda'``, ``'cuda:0'``; ``'auto'``:
+        the one the package's ``device='auto'`` picks); a CUDA device is named by its model.
     """
     import torch
+
+    if device == "auto":
+        from napari_lfdeblur.devices import select_device
+
+        device = select_device("auto").type
 
     text = (f"{cpu_model()}, {os.cpu_count()} cores; torch {torch.__version__}, "
             f"{torch.get_num_threads()} threads")

@@ -103,7 +103,7 @@ def main(argv=None) -> int:
     path = _report.table_path(args.out, __file__, smoke=args.quick)
     if path is not None:
         _report.write_table(path, "Angular differences of the TV, with the true path", _report.command_line(__file__),
-                            _report.machine("cpu"), body)
+                            _report.machine("auto"), body)
     else:
         print("\n".join(body))
     return 0

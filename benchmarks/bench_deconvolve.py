@@ -150,7 +150,7 @@ def _write(results, shape, out, argv):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--devices", nargs="+", default=None, help="cpu and/or cuda (default: cpu, plus cuda if available)")
-    ap.add_argument("--cases", nargs="+", default=["inplane", "tv"])
+    ap.add_argument("--cases", nargs="+", default=["inplane", "tv"], choices=["inplane", "tv"])
     ap.add_argument("--tv-iterations", type=int, default=None, help="TV iterations (default 4 on CPU, 50 on CUDA)")
     ap.add_argument("--quick", action="store_true", help="a 5x5x64x64x3 light field; writes nothing unless --out")
     _report.add_out_argument(ap, __file__)

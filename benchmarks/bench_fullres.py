@@ -188,6 +188,9 @@ def main(argv=None):
     parser.add_argument("--case-json", help=argparse.SUPPRESS)  # internal: run CASE:RUN, print its JSON
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
+    unknown = sorted(set(args.cases.split(",")) - set(CASES))
+    if unknown:
+        parser.error(f"unknown case(s) {', '.join(unknown)}: choose from {', '.join(CASES)}")
     from napari_lfdeblur.devices import select_device
 
     device = str(select_device(args.device))

@@ -1,4 +1,4 @@
-"""A Lytro Illum decode on a 16 GB laptop: read 15 x 15 x 434 x 625, keep the central 9 x 9 views, deblur blindly.
+"""A decode the size of a Lytro Illum's, in a 16 GB laptop's memory: read 15 x 15 x 434 x 625, keep 9 x 9, deblur.
 
 Usage::
 
@@ -144,7 +144,8 @@ def main(argv=None):
     size = "x".join(str(s) for s in shape)
     kept = "x".join(str(s) for s in blind["shape"])
     lines = [
-        f"The decode: {size} x 4 uint16 ({files['file_bytes'] / GB:.2f} GB), the scene blurred by the path "
+        f"The decode: a rendered scene (`procedural_scene`, seed 7) in the Light Field Toolbox's layout, {size} x 4 "
+        f"uint16 ({files['file_bytes'] / GB:.2f} GB), blurred by the path "
         f"{PATH.tolist()} (64 instants) over all views, noise sigma {NOISE:g}; read with `angular_crop={keep}` "
         f"to {kept} float32 ({blind['lf_gb']:.2f} GB). Peak memory: the whole process's high-water mark "
         f"(the interpreter and torch alone: {blind['base_gb']:.2f} GB).",
@@ -167,7 +168,7 @@ def main(argv=None):
     if out is None:
         print("\n".join(lines))
     else:
-        _report.write_table(out, "A Lytro Illum decode on a laptop: read, crop to 9 x 9 views, deblur",
+        _report.write_table(out, "A decode the size of a Lytro Illum's: read, crop to 9 x 9 views, deblur",
                             _report.command_line(__file__, argv), _report.machine(device), lines)
     return 0
 

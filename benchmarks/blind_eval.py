@@ -668,7 +668,11 @@ def run_case(spec, run, device, quick) -> list[dict]:
 def main(argv=None) -> int:
     args = parse_args(argv)
     names = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases else None
-    specs, missing = select_cases(args.split, names, args.quick)
+    try:
+        specs, missing = select_cases(args.split, names, args.quick)
+    except ValueError as exc:  # an unknown case name
+        print(f"blind_eval.py: error: {exc}", file=sys.stderr)
+        return 2
     output = args.out if args.out is not None else (None if args.quick else table_for(args.split))
 
     import torch

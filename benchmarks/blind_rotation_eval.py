@@ -189,7 +189,7 @@ def _summary(rows) -> list[str]:
     return out
 
 
-def write(rows, args, argv, device):
+def write(rows, args, argv, device, smoke=False):
     body = [
         __doc__.split("\n\n")[3].replace("\n", " "),
         "",
@@ -213,8 +213,8 @@ def write(rows, args, argv, device):
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *[_line(r) for r in rows],
     ]
-    path = _report.table_path(args.out, __file__, args.quick)
-    if path is None:  # a smoke run: print, write nothing
+    path = _report.table_path(args.out, __file__, args.quick or smoke)
+    if path is None:  # a smoke run or the dev split: print, write nothing (unless to --out)
         print("\n".join(body))
         return None
     return _report.write_table(path, "Blind deblurring with camera rotation", _report.command_line(__file__, argv),
@@ -230,7 +230,7 @@ def main(argv=None):
     parser.add_argument("--degrees", type=float, nargs=2, default=DEGREES, metavar=("LO", "HI"),
                         help="size of the rotation across the path on a full frame, degrees (default 0.2 0.6)")
     parser.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="eval",
-                        help="'dev': another list of cases, for trying changes on (printed, no table)")
+                        help="'dev': another list of cases, for trying changes on (printed, or written to --out only)")
     parser.add_argument("--device", default="auto")
     _report.add_out_argument(parser, __file__)
     args = parser.parse_args(argv)
@@ -240,6 +240,8 @@ def main(argv=None):
         rows.append(evaluate(spec, str(device), args.quick, tuple(args.degrees)))
         if args.split == "eval":
             write(rows, args, argv, device)
+    if args.split != "eval":
+        write(rows, args, argv, device, smoke=True)
 
 
 if __name__ == "__main__":

@@ -212,7 +212,7 @@ def _table(rows, out, argv):
             f"{tv} | {r['weight_4d']:g} | {r['balance_2d']:g} |"
         )
     _report.write_table(out, "In-plane experiment: 4D versus 2D deconvolution", _report.command_line(__file__, argv),
-                        _report.machine("cpu"), lines)
+                        _report.machine("auto"), lines)
 
 
 if __name__ == "__main__":

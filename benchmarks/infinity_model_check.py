@@ -138,11 +138,11 @@ def main(argv=None):
             f"T = {args.n_times} instants. *Package*: `simulate_blur` with `infinity_disparity=d_inf`, the model of "
             "docs/model.md. *Sheared*: the camera focused at infinity, blurred with `d_inf = 0`, its views then "
             "shifted by `d_inf` px per view (exact at integer `d_inf`). The last column: the root-mean-square "
-            "change that the blur makes to a scene all nearly at infinity. Run on a 2-core CPU.",
+            "change that the blur makes to a scene all nearly at infinity.",
             "", *lines]
     out = _report.table_path(args.out, __file__)
     _report.write_table(out, "The blur model at a non-zero infinity disparity against a ray tracer",
-                        _report.command_line(__file__, argv), _report.machine("cpu"), body)
+                        _report.command_line(__file__, argv), _report.machine("auto"), body)
     return 0
 
 

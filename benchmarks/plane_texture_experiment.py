@@ -55,7 +55,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     _report.add_out_argument(ap, __file__)
     ap.add_argument("--no-figure", action="store_true", help="write the table only, not docs/images/plane_texture.png")
-    ap.add_argument("--cases", type=int, nargs="+", default=None, metavar="I",
+    ap.add_argument("--cases", type=int, nargs="+", default=None, metavar="I", choices=range(len(CASES)),
                     help="indices into CASES to run (default: all; the figure needs case 2)")
     args = ap.parse_args(argv)
     cases = CASES if args.cases is None else [CASES[i] for i in args.cases]
@@ -97,7 +97,7 @@ def main(argv=None):
     lines += ["| {:.1f} | {:.0f} | {:.3f} | {:.0f} | {:.2f} | {:.4f} | {:.4f} | {:.4f} |".format(*r) for r in rows]
     _report.write_table(_report.table_path(args.out, __file__),
                         "Out-of-plane motion of a textured plane: recovery by refocusing",
-                        _report.command_line(__file__, argv), _report.machine("cpu"), lines)
+                        _report.command_line(__file__, argv), _report.machine("auto"), lines)
 
 
 def _figure(shown):

@@ -78,6 +78,10 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="one small case; writes nothing unless --out")
     _report.add_out_argument(ap, __file__)
     args = ap.parse_args(argv)
+    try:
+        inner = [int(v) for v in args.inner.split(",")]
+    except ValueError:
+        ap.error(f"--inner takes whole numbers separated by commas; got {args.inner!r}")
     import torch
 
     from napari_lfdeblur.blur import simulate_blur
@@ -85,7 +89,6 @@ def main(argv=None):
     from napari_lfdeblur.metrics import psnr
 
     torch.set_num_threads(args.threads)
-    inner = [int(v) for v in args.inner.split(",")]
     noises = NOISES[:1] if args.quick else NOISES
     ref_inner, ref_iter = (2, 20) if args.quick else REFERENCE
     cp = bench_fullres.PATH - bench_fullres.PATH.mean(axis=0)

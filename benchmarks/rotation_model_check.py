@@ -206,7 +206,7 @@ def write_table(lines: list[str], out, n_times: int, argv) -> None:
          "rotation ignored; *+ aperture*: first order plus the rotation of the aperture point), *package* is "
          "`simulate_blur` with `(n, 6)` control points (n/a where it refuses them), and the *exact* columns "
          "trace each model's rays through the scene, which leaves the model's geometric error without the "
-         "interpolation's. Run on a 2-core CPU."),
+         "interpolation's."),
         "",
         *lines,
     ]

@@ -141,7 +141,7 @@ def main(argv=None) -> None:
     out = _report.table_path(args.out, __file__, smoke=args.quick)
     if out is not None:
         _report.write_table(out, "The default TV weight: factor times the estimated noise",
-                            _report.command_line(__file__, argv), _report.machine("cpu"), body)
+                            _report.command_line(__file__, argv), _report.machine("auto"), body)
 
 
 if __name__ == "__main__":
