@@ -1282,3 +1282,14 @@ def test_transposed_views_are_warned_about_before_any_work(recwarn):
     recwarn.clear()
     iter_blind_deblur(lf.swapaxes(0, 1), device="cpu", check_view_order=False).close()
     assert not view_order_warnings()
+
+
+def test_blind_deblur_leaves_the_global_random_generators_alone(linear_case):
+    _, _, blurred = linear_case
+    torch.manual_seed(123)
+    np.random.seed(5)
+    torch_state, numpy_state = torch.get_rng_state(), np.random.get_state()
+    p = BlindParams().replace(n_control_points=2, **FAST).replace(final=None)
+    blind_deblur(blurred, params=p, device="cpu", seed=3)
+    assert torch.equal(torch.get_rng_state(), torch_state)  # it was reseeded with the solver's seed
+    assert all(np.array_equal(a, b) for a, b in zip(np.random.get_state(), numpy_state))

@@ -93,7 +93,6 @@ import time
 import warnings
 
 import numpy as np
-import torch
 
 from .. import devices
 from .._lightfield import BRIGHT_LIMIT, brightest, caller_stacklevel, check_number, check_seed
@@ -169,7 +168,8 @@ def blind_deblur(
         cannot hold the path stage falls back to the CPU, with a warning
         (docs/blind.md, *Memory*).
     seed : int, default 0
-        Seed of the random parts (initial paths); equal seeds give equal results.
+        Seed of the random parts (initial paths); equal seeds give equal results. The solver draws
+        from its own generator: the global ones of numpy and torch are left as they were.
     callback : callable, optional
         Called with each :class:`~napari_lfdeblur.progress.Progress` record.
     max_memory : float, optional
@@ -358,8 +358,7 @@ def _make_params(params, overrides) -> BlindParams:
 
 def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None, windows=None):
     t0 = time.perf_counter()
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed)  # every draw of the solver (torch's global generator is the caller's)
     V, U, Y, X = arr.shape[:4]
     box = p.path_box(V, U)
     sheared = p.method == "alternating" and d_inf != 0.0
