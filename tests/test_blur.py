@@ -303,3 +303,21 @@ def test_a_read_only_light_field_is_blurred_without_a_warning():
         warnings.simplefilter("error")  # torch warned that the array is not writable
         out = simulate_blur(frozen, [[-1.0, 0.0, 0.0], [1.0, 0.5, 0.0]], n_times=8)
     np.testing.assert_array_equal(out, simulate_blur(lf, [[-1.0, 0.0, 0.0], [1.0, 0.5, 0.0]], n_times=8))
+
+
+def test_the_fused_loops_leave_numbas_thread_count_as_it_was():
+    numba = pytest.importorskip("numba")
+    from napari_lfdeblur import _fused
+
+    if not _fused.available("cpu"):
+        pytest.skip("the fused loops are off")
+    before_numba, before_torch = numba.get_num_threads(), torch.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        torch.set_num_threads(2)
+        lf = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
+        simulate_blur(lf, [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], n_times=4)
+        assert numba.get_num_threads() == 1  # it ran with torch's 2 (where numba has them), then put 1 back
+    finally:
+        numba.set_num_threads(before_numba)
+        torch.set_num_threads(before_torch)

@@ -580,12 +580,25 @@ def _long_blind_run(make_napari_viewer, qtbot, lf):
     return viewer, w, worker
 
 
-def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, notifications):
+def test_blind_cancel_leaves_no_partial_layer(make_napari_viewer, qtbot, lf, notifications, monkeypatch):
+    from napari_lfdeblur import blind
+
+    closed, real = [], blind.iter_blind_deblur
+
+    def watched(*args, **kwargs):
+        try:
+            return (yield from real(*args, **kwargs))
+        finally:
+            closed.append(True)
+
+    monkeypatch.setattr(blind, "iter_blind_deblur", watched)
     viewer, w, _ = _long_blind_run(make_napari_viewer, qtbot, lf)
     assert w.is_running
     w.cancel()
     qtbot.waitUntil(lambda: not w.is_running, timeout=10_000)
     qtbot.wait(100)
+    # the solver is closed, and its memory freed (the quit worker left it suspended, and napari keeps the worker)
+    assert closed == [True]
     assert [layer.name for layer in viewer.layers] == ["b"]
     assert w.last_result is None
     assert ("info", "Blind deblur: cancelled") in notifications

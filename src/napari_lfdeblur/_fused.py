@@ -79,12 +79,19 @@ def _run(name, *args):
 
 
 def call(loop, *args):
-    """Run the compiled parallel ``loop`` on ``args`` with torch's number of threads, one loop at a time."""
+    """Run the compiled parallel ``loop`` on ``args`` with torch's number of threads, one loop at a time.
+
+    numba's thread count (a setting of the calling thread) is put back afterwards.
+    """
     import numba
 
     with _LOCK:
+        before = numba.get_num_threads()
         numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
-        loop(*args)
+        try:
+            loop(*args)
+        finally:
+            numba.set_num_threads(before)
 
 
 def check_writable(t: torch.Tensor) -> None:

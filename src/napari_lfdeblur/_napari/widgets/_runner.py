@@ -126,6 +126,17 @@ def _guarded(make_generator, preview_every: int, cancel: threading.Event | None 
     return result
 
 
+def _kept(box: list, *args):
+    """:func:`_guarded`'s generator, appended to ``box`` so that the widget can close it.
+
+    A worker that is told to quit stops asking for records and ends, but
+    leaves its generator suspended (and napari keeps the worker): closing it
+    closes the solver, whose tensors (on the GPU too) are then freed.
+    """
+    box.append(_guarded(*args))
+    return (yield from box[-1])
+
+
 class SolverWidget(Container):
     """Base of the solver dock widgets: input layer, Run / Cancel, progress, a thread worker.
 
@@ -149,6 +160,7 @@ class SolverWidget(Container):
     def __init__(self, napari_viewer):
         self.viewer = napari_viewer
         self.worker = None
+        self._kept = []  # the running worker's generator (see _kept)
         self.input_placement = ((1.0,) * 4, (0.0,) * 4)  # (scale, translate) of the input layer of the last run
         self._gone = False  # the widget's Qt side was deleted (the viewer closed): signals update nothing
         self._cancelled = False
@@ -259,7 +271,8 @@ class SolverWidget(Container):
         self.last_result = None
         self.last_layers = []
         self.progress.start(f"{self.title}: starting...")
-        worker = thread_worker(_guarded, start_thread=False)(job, self.preview_every(), self._cancel_event)
+        self._kept = []
+        worker = thread_worker(_kept, start_thread=False)(self._kept, job, self.preview_every(), self._cancel_event)
         worker.yielded.connect(self._on_yielded)
         worker.returned.connect(self._on_returned)
         worker.aborted.connect(self._on_aborted)
@@ -359,6 +372,9 @@ class SolverWidget(Container):
         notify_info(f"{self.title}: cancelled")
 
     def _on_finished(self):
+        for gen in self._kept:  # the worker has ended: a run it quit is suspended, and is closed here
+            gen.close()
+        self._kept = []
         if self._gone:
             self.worker = None
             return
