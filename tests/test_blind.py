@@ -1293,3 +1293,17 @@ def test_blind_deblur_leaves_the_global_random_generators_alone(linear_case):
     blind_deblur(blurred, params=p, device="cpu", seed=3)
     assert torch.equal(torch.get_rng_state(), torch_state)  # it was reseeded with the solver's seed
     assert all(np.array_equal(a, b) for a, b in zip(np.random.get_state(), numpy_state))
+
+
+def test_joint_and_final_settings_are_checked_and_named():
+    with pytest.raises(ValueError, match="BlindParams.joint.n_iter must be >= 1"):  # 0 returned the random start
+        BlindParams().replace(joint={"n_iter": 0})
+    with pytest.raises(ValueError, match="prior_floor is a fraction of the start, at most 1"):
+        BlindParams().replace(joint={"prior_floor": 5.0})
+    with pytest.raises(ValueError, match="eps_min must not exceed eps"):
+        BlindParams().replace(joint={"eps": 0.1, "eps_min": 0.2})
+    # the final stage's errors say that they are the final stage's (not joint's n_iter, say)
+    with pytest.raises(ValueError, match=r"^BlindParams\.final: n_iter must be >= 1"):
+        BlindParams().replace(final={"n_iter": 0})
+    with pytest.raises(ValueError, match=r"^BlindParams\.final: n_iter must be >= 1"):
+        BlindParams.from_dict({"final": {"n_iter": 0}})

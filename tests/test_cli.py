@@ -620,3 +620,11 @@ def test_the_gpu_running_out_of_memory_is_one_line(lf_file, tmp_path, capsys, mo
     monkeypatch.setattr(cli, "_run_simulate", broken)
     with pytest.raises(RuntimeError, match="something else"):
         main(["simulate", str(src), str(tmp_path / "d.npz"), "--path", "linear:2"])
+
+
+def test_a_params_file_that_is_a_folder_is_named_as_one(lf_file, tmp_path, capsys):
+    _, src = lf_file
+    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--params", str(tmp_path)]) == 2
+    assert f"parameter file {tmp_path} is a folder" in capsys.readouterr().err
+    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--params", str(tmp_path / "none.json")]) == 2
+    assert "does not exist" in capsys.readouterr().err

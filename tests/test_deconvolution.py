@@ -818,6 +818,12 @@ def test_cli_deconvolve(tmp_path, capsys):
     assert saved["kind"] == "deconvolved" and saved["napari_lfdeblur_version"] == napari_lfdeblur.__version__
     assert saved["parameters"]["weight"] == 0.0 and saved["parameters"]["method"] == "tv"
     assert saved["parameters"]["weight_used"] == 0.0
+    # every parameter of the solve, those left at their defaults too: they make the same DeconvolutionParams
+    from napari_lfdeblur.deconvolution import DeconvolutionParams
+
+    stated = {k: v for k, v in saved["parameters"].items() if k not in ("weight_used", "noise_sigma")}
+    assert set(stated) == set(DeconvolutionParams().to_dict())
+    assert DeconvolutionParams.from_dict(stated).method == "tv"
     # an existing output (or path beside it) is kept unless --overwrite
     assert main(["deconvolve", str(src), str(path_file), str(out)]) == 2
     assert "exists" in capsys.readouterr().err

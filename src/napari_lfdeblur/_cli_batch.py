@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ._cli_types import seed, value_range
 
-__all__ = ["add_batch", "run_batch", "weak_blur_summary", "ctrl_c_never_swallowed"]
+__all__ = ["add_batch", "run_batch", "blind_params", "weak_blur_summary", "ctrl_c_never_swallowed"]
 
 
 def _common(p) -> None:
@@ -72,14 +72,16 @@ def add_batch(sub) -> None:
     p.add_argument("--params", help="a JSON file of BlindParams, nested by stage (overrides --preset)")
 
 
-def _params(args):
+def blind_params(args):
+    """The BlindParams of ``--params`` (a JSON file), else of ``--preset``."""
     from .blind import BlindParams
 
     if not args.params:
         return BlindParams.preset(args.preset)
-    if not Path(args.params).is_file():
-        raise ValueError(f"parameter file {args.params} does not exist")
-    return BlindParams.from_json(Path(args.params).read_text())
+    path = Path(args.params)
+    if not path.is_file():
+        raise ValueError(f"parameter file {path} {'is a folder' if path.is_dir() else 'does not exist'}")
+    return BlindParams.from_json(path.read_text())
 
 
 def _command(args) -> str:
@@ -132,7 +134,7 @@ def _run(args) -> int:
         options = dict(n_per_input=args.n_per_input, path_kind=args.path_kind, extent=_extent(args.extent),
                        noise=args.noise, n_times=args.n_times)
     else:
-        total, run, options = n_inputs, deblur_many, dict(params=_params(args))
+        total, run, options = n_inputs, deblur_many, dict(params=blind_params(args))
     fold_dask_tracebacks()  # this process's; the embedded workers fold their own
     bar = []  # made at the first item: arguments are checked and the cluster started before
 

@@ -9,6 +9,7 @@ merged onto the field's default (``from_dict``) or its current value
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -82,8 +83,21 @@ class JsonParams:
         for name, value in changes.items():
             if name in nested and isinstance(value, dict):
                 current = getattr(self, name)
-                changes[name] = (nested[name] if current is None else current).replace(**value)
+                with self._naming(name):
+                    changes[name] = (nested[name] if current is None else current).replace(**value)
         return dataclasses.replace(self, **changes)
+
+    @classmethod
+    @contextlib.contextmanager
+    def _naming(cls, name):
+        """Errors of the nested field ``name`` say which field they are about (``BlindParams.final: ...``)."""
+        where = f"{cls.__name__}.{name}"
+        try:
+            yield
+        except (TypeError, ValueError) as exc:
+            if where in str(exc):
+                raise
+            raise type(exc)(f"{where}: {exc}") from None
 
     def to_dict(self) -> dict:
         """The parameters as a plain dict (JSON types only; nested fields as sub-dicts)."""
@@ -114,8 +128,9 @@ class JsonParams:
             value = d.get(name)
             if isinstance(value, dict):
                 sub = type(default)
-                sub._check_keys(value)
-                d[name] = sub.from_dict({**default.to_dict(), **value})
+                with cls._naming(name):
+                    sub._check_keys(value)
+                    d[name] = sub.from_dict({**default.to_dict(), **value})
         return cls(**d)
 
     def to_json(self) -> str:

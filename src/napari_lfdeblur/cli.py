@@ -15,7 +15,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from ._cli_batch import add_batch as _add_batch, run_batch as _run_batch  # noqa: F401 (lfdeblur batch)
+from ._cli_batch import add_batch as _add_batch, blind_params, run_batch as _run_batch  # noqa: F401 (batch)
 from ._cli_info import (
     DEFAULT_N_TIMES,
     CLIError,
@@ -221,7 +221,7 @@ def _add_deblur(sub):
 
 
 def _run_deblur(args):
-    from .blind import BlindParams, iter_blind_deblur
+    from .blind import iter_blind_deblur
     from .progress import run_to_completion
     from .io._write import sidecar_path_json, write_lightfield
     from .path import save_path_json
@@ -232,12 +232,7 @@ def _run_deblur(args):
     rejected_file = (extra_file.with_name(extra_file.stem + "_rejected" + extra_file.suffix) if extra_file else
                      out.with_name(out.stem + ".path_rejected.json"))
     _check_targets([out, path_file, extra_file, rejected_file], args.overwrite, [args.input])
-    if args.params:
-        if not Path(args.params).is_file():
-            raise CLIError(f"parameter file {args.params} does not exist")
-        params = BlindParams.from_json(Path(args.params).read_text())
-    else:
-        params = BlindParams.preset(args.preset)
+    params = blind_params(args)
     if args.edge_anisotropy is not None:
         params = params.replace(latent={"edge_anisotropy": args.edge_anisotropy})
     if args.restore_anyway:
@@ -386,7 +381,7 @@ def _add_deconvolve(sub):
 
 
 def _run_deconvolve(args):
-    from .deconvolution import iter_deconvolve
+    from .deconvolution import DeconvolutionParams, iter_deconvolve
     from .io._write import sidecar_path_json, write_lightfield
     from .path import read_path_json, validate_control_points
     from .progress import run_to_completion
@@ -432,8 +427,9 @@ def _run_deconvolve(args):
         bar.close()
     rec = last[-1]
     used = {"weight_used": rec.info.get("weight"), "noise_sigma": rec.info.get("sigma")}  # the weight rule's choice
+    every = DeconvolutionParams().replace(**options).to_dict()  # every parameter of the solve, defaults too
     write_lightfield(out, result, overwrite=args.overwrite, control_points=cp, metadata=result_metadata(
-        "deconvolved", {**options, **used}, n_times=n_times, infinity_disparity=d_inf))
+        "deconvolved", {**every, **used}, n_times=n_times, infinity_disparity=d_inf))
     print(f"wrote {out} {result.shape} ({rec.stage}, {rec.iteration} iteration(s), weight {used['weight_used']})")
 
 
@@ -477,7 +473,7 @@ def main(argv=None) -> int:
     except BrokenPipeError:  # the reader of stdout went away (lfdeblur info X | head): stop quietly, as cat does
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so that the exit's flush fails no more
         return 141
-    except (CLIError, ValueError, TypeError, OSError) as exc:
+    except (CLIError, ValueError, TypeError, OSError, OverflowError) as exc:
         print(f"lfdeblur {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except (MemoryError, RuntimeError) as exc:  # numpy's names the array it could not allocate

@@ -179,7 +179,8 @@ def blind_deblur(
         device has free.
     windows : list of (y0, x0, height, width), optional
         Where in the view the path is estimated (pixels; each window at
-        least 16 px a side, one window for ``motion='6dof'``). Default:
+        least 16 px a side, disjoint; one window for ``motion='6dof'`` and
+        ``method='joint'``). Default:
         chosen from the data where the views are larger than
         ``params.path.region`` px, else the whole view. Name them to keep
         the estimate off a subject that moved by itself (its blur is not
@@ -209,8 +210,9 @@ def blind_deblur(
         On a malformed light field (wrong ndim, NaN, values reaching 2: not
         on the [0, 1] scale), invalid parameter values, an
         ``infinity_disparity`` that is not finite, beyond the views or
-        ``'auto'``, or ``windows`` that are malformed, too small or reach
-        outside the views.
+        ``'auto'``, or ``windows`` that are malformed, too small, reach
+        outside the views, overlap or are more than one where only one is
+        taken.
     TypeError
         On an unknown keyword or parameter of the wrong type.
     """
@@ -249,11 +251,14 @@ def iter_blind_deblur(
         ``stage`` names the stage (``'path (level i/n, YxX)'`` for a pyramid
         level, ``'path (p_z i/n, ...)'`` for the stage that frees ``p_z``:
         ``n`` counts them and, with ``motion='6dof'``, the ``'rotation
-        (YxX)'`` stage after them; ``'evidence'``, ``'final'``),
-        ``control_points`` the current path (in every record). ``estimate()``
-        computes the current light-field estimate (input shape, float32; in
-        the path stage the grayscale latent, upsampled, placed in the full
-        frame and repeated over the channels); wrap the generator in
+        (YxX)'`` stage after them; ``'path (joint)'`` with ``method='joint'``;
+        ``'evidence'``; ``'final'``, or ``'final (tile i/n)'`` when the final
+        stage is tiled), ``control_points`` the current path (in every
+        record). ``estimate()`` computes the current light-field estimate
+        (input shape, float32; in the path stage the grayscale latent,
+        upsampled, placed in the full frame and repeated over the channels);
+        the rotation and evidence records have none (``estimate`` is None).
+        Wrap the generator in
         :func:`~napari_lfdeblur.progress.with_previews` to get ``preview``
         arrays. In the path stage ``iteration`` counts the records of the
         level out of ``n_iterations`` (an alternation ending early jumps to

@@ -94,7 +94,7 @@ class PathFitParams(JsonParams):
         the window of that size that conditions the fit best (edges in two
         directions, disparity away from ``d_inf``; docs/blind.md) and used
         for the whole light field, so that its cost does not grow with the
-        capture (0: on the whole view).
+        capture (0: on the whole view; else at least ``min_size``).
     n_regions : int
         On views larger than ``region``, the number of such windows, spread
         over the view (one in each cell of a grid, see
@@ -108,7 +108,7 @@ class PathFitParams(JsonParams):
         Spatial pyramid levels (1 = full resolution only). Levels smaller
         than ``min_size`` px are skipped.
     min_size : int
-        Smallest spatial size of a pyramid level.
+        Smallest spatial size of a pyramid level (>= 4).
     max_size : int
         Largest spatial size (smaller side) used for the path estimation;
         finer levels are skipped (0: up to full resolution). The path means
@@ -131,7 +131,7 @@ class PathFitParams(JsonParams):
         change of a sampled position) in two successive alternations.
     n_pixels : int
         Pixels (chosen at random, favouring strong gradients, with all their
-        views) on which the path is fitted to the latent.
+        views) on which the path is fitted to the latent (>= 16).
     n_random : int
         Random paths (control points uniform within ``+-init_length`` views)
         tried at the start besides the lines, all fitted at once as a batch.
@@ -226,7 +226,7 @@ class RotationFitParams(JsonParams):
         Adam's step: views for the translation, px of image motion
         (``R r``) for the rotation.
     n_times : int
-        Exposure instants of the model during the stage.
+        Exposure instants of the model during the stage (>= 2).
     fit_tol : float
         The path fit stops early when its loss fell by less than this
         fraction over the last 10 steps, the first 10 counted from the
@@ -262,17 +262,17 @@ class JointParams(JsonParams):
     Attributes
     ----------
     n_iter : int
-        Iterations (Adam steps on the path and the light field together).
+        Iterations (Adam steps on the path and the light field together), >= 1.
     lr : float
         Adam step of the path (views).
     lf_lr : float
         Adam step of the light field.
     prior_weight, prior_decay, prior_floor : float
         Weight of the sparse-gradient prior, its decay per iteration, in
-        (0, 1], and its floor as a fraction of the start.
+        (0, 1], and its floor as a fraction of the start, in [0, 1].
     eps, eps_decay, eps_min : float
         ``eps`` of the sparse-gradient prior, its decay per iteration, in
-        (0, 1], and its floor.
+        (0, 1], and its floor, at most ``eps``.
     """
 
     n_iter: int = 1000
@@ -288,8 +288,13 @@ class JointParams(JsonParams):
     _what = "blind joint"
 
     def __post_init__(self):
-        check_fields(self, "BlindParams.joint", ints={"n_iter": 0}, nonneg=("prior_weight", "prior_floor", "eps_min"),
+        check_fields(self, "BlindParams.joint", ints={"n_iter": 1}, nonneg=("prior_weight", "prior_floor", "eps_min"),
                      positive=("lr", "lf_lr", "eps", "prior_decay", "eps_decay"), unit=("prior_decay", "eps_decay"))
+        if self.prior_floor > 1:
+            raise ValueError(f"BlindParams.joint.prior_floor is a fraction of the start, at most 1; "
+                             f"got {self.prior_floor}")
+        if self.eps_min > self.eps:
+            raise ValueError(f"BlindParams.joint.eps_min must not exceed eps ({self.eps}); got {self.eps_min}")
 
 
 def _default_final() -> DeconvolutionParams:
@@ -326,7 +331,7 @@ class BlindParams(JsonParams):
         (``'alternating'``) or ``+-max_extent`` (``'joint'``); 0 means
         ``max(0.5, 0.35 (min(V, U) - 1))``.
     final_n_times : int
-        Exposure instants of the final non-blind solve.
+        Exposure instants of the final non-blind solve (>= 2).
     latent : LatentParams
         The salient-edge latent (``'alternating'``).
     path : PathFitParams
