@@ -9,7 +9,8 @@ import sys
 import numpy as np
 
 __all__ = ["check_int", "check_view_grid", "check_number", "check_seed", "check_infinity_disparity",
-           "validate_lightfield", "brightest", "white_level", "caller_stacklevel", "DARK_LEVEL", "BRIGHT_LIMIT", "MAX_SEED"]
+           "validate_lightfield", "brightest", "white_level", "caller_stacklevel", "DARK_LEVEL", "BRIGHT_LIMIT",
+           "MAX_SEED"]
 
 #: A light field whose :func:`brightest` value is below this is dark: the blind solver's salient-edge
 #: weight is absolute, and dark data (10- or 12-bit values in a 16-bit file, a linear decode) show it few edges.

@@ -305,7 +305,8 @@ class BlurOperator:
         self.n_times = validate_n_times(n_times)
         self.infinity_disparity = check_number(infinity_disparity, "infinity_disparity")
         if not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
-            raise TypeError(f"dtype must be a floating-point torch dtype (torch.float32, torch.float64); got {dtype!r}")
+            raise TypeError(f"dtype must be a floating-point torch dtype (torch.float32, torch.float64); "
+                            f"got {dtype!r}")
         self.dtype = dtype
         if isinstance(control_points, torch.Tensor):
             self.device = control_points.device if device in (None, "auto") else select_device(device)
@@ -361,7 +362,8 @@ class BlurOperator:
         if tuple(t.shape) != shape:
             raise ValueError(f"expected a tensor of shape {shape}; got {tuple(t.shape)}")
         if t.device.type != self.device.type or (t.device.index or 0) != (self.device.index or 0):
-            raise ValueError(f"the tensor is on {t.device}, the operator on {self.device}: move one of them")
+            raise ValueError(f"the tensor is on {t.device}, the operator on {self.device}: "
+                             "move one of them")
         if t.dtype != self.dtype:
             raise TypeError(f"expected a tensor of dtype {self.dtype} (the operator's); got {t.dtype}")
         return t

@@ -70,7 +70,7 @@ def free_memory(device: str | torch.device | None = "auto") -> int | None:
 
 
 def empty_cache(device: str | torch.device) -> None:
-    """Release cached GPU memory and cuBLAS workspaces (a no-op on the CPU); ``device`` as for :func:`select_device`."""
+    """Release cached GPU memory and cuBLAS workspaces (a no-op on the CPU); ``device``: a name or torch.device."""
     device = torch.device(device)
     if device.type == "cuda" and torch.cuda.is_available():  # pragma: no cover - needs a GPU
         torch.cuda.synchronize(device)
