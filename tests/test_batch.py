@@ -538,3 +538,16 @@ def test_a_deblurred_item_records_the_device_it_ran_on(monkeypatch, inputs, tmp_
         torch.set_num_threads(n)  # a worker's setting
     assert rec["status"] == "ok", rec.get("error")
     assert rec["device"] == "cpu"  # where it ran, not what was asked for
+
+
+def test_an_output_may_not_replace_its_inputs_path_file(tmp_path):
+    from napari_lfdeblur.io import write_lightfield as write
+
+    src = write(tmp_path / "a.npy", np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32),
+                control_points=[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])  # a.npy and its a.path.json
+    path_file = tmp_path / "a.path.json"
+    kept = path_file.read_bytes()
+    # deblurred into the same folder, a.npz would write its path to a.path.json, the input's
+    with pytest.raises(ValueError, match="would replace its path file"):
+        deblur_many([src], tmp_path, params=TINY, device="cpu", overwrite=True)
+    assert path_file.read_bytes() == kept and not (tmp_path / "a.npz").exists()

@@ -628,3 +628,43 @@ def test_a_params_file_that_is_a_folder_is_named_as_one(lf_file, tmp_path, capsy
     assert f"parameter file {tmp_path} is a folder" in capsys.readouterr().err
     assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--params", str(tmp_path / "none.json")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_an_output_beside_the_input_may_not_replace_the_inputs_path_file(lf_file, tmp_path, capsys):
+    """b.tif writes its path to b.path.json, which holds the path of the input b.npy: --overwrite took it."""
+    lf, src = lf_file
+    blurred = tmp_path / "b.npy"
+    assert main(["simulate", str(src), str(blurred), "--path", "arc:2", "--n-times", "8",
+                 "--infinity-disparity", "0.5"]) == 0
+    path_file = tmp_path / "b.path.json"
+    kept = path_file.read_bytes()
+    for command in (["deconvolve", str(blurred), str(tmp_path / "b.tif"), "--iterations", "2", "--overwrite"],
+                    ["deblur", str(blurred), str(tmp_path / "b.tif"), "--overwrite"],
+                    ["simulate", str(blurred), str(tmp_path / "b.tif"), "--path", "linear:1", "--overwrite"]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert f"{path_file} holds the camera path of the input {blurred}" in err, err
+        assert path_file.read_bytes() == kept and not (tmp_path / "b.tif").exists()
+    # the input keeps its path: it deconvolves as before
+    assert main(["deconvolve", str(blurred), str(tmp_path / "d.npz"), "--iterations", "2"]) == 0
+
+
+def test_demo_replaces_only_its_own_files(tmp_path, capsys):
+    out = tmp_path / "project"
+    out.mkdir()
+    (out / "summary.json").write_text('{"my": "results"}')  # a file of the user's, of a name the demo writes
+    (out / "notes.txt").write_text("mine")
+    assert main(["demo", "--out", str(out), "--quick", "--skip-blind"]) == 2
+    assert "summary.json exists and is not the demo's" in capsys.readouterr().err
+    assert (out / "summary.json").read_text() == '{"my": "results"}' and sorted(p.name for p in out.iterdir()) == [
+        "notes.txt", "summary.json"]
+    # an earlier demo's files are its own: a rerun replaces them, and removes those it does not make
+    demo = tmp_path / "demo"
+    assert main(["demo", "--out", str(demo), "--quick", "--skip-blind"]) == 0
+    (demo / "synthetic_blind.npz").write_bytes(b"stale")  # as a run with the blind solver left them
+    summary = json.loads((demo / "summary.json").read_text())
+    summary["files"].append("synthetic_blind.npz")
+    (demo / "summary.json").write_text(json.dumps(summary))
+    assert main(["demo", "--out", str(demo), "--quick", "--skip-blind"]) == 0
+    assert not (demo / "synthetic_blind.npz").exists()
+    assert sorted(json.loads((demo / "summary.json").read_text())["files"]) == sorted(p.name for p in demo.iterdir())

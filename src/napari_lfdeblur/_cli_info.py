@@ -211,16 +211,22 @@ class CLIError(Exception):
 def check_targets(targets, overwrite: bool, inputs=()) -> None:
     """Refuse, before any work, an output file (None: none) that exists without ``--overwrite``, or whose
     folder does not exist (unless that folder is one of the outputs: a folder of views and its path.json);
-    also two outputs of one name, and an output that is one of the ``inputs``."""
+    also two outputs of one name, and an output that is one of the ``inputs`` or the path file beside one
+    (``b.path.json`` of the input ``b.npy``, which an output ``b.tif`` would write its own path to)."""
     from .io._common import check_writable
+    from .io._write import path_json_beside
 
     named = [Path(t).resolve() for t in targets if t is not None]
+    beside = {path_json_beside(i).resolve(): i for i in inputs if path_json_beside(i).is_file()}
     for target in targets:
         if target is not None and named.count(Path(target).resolve()) > 1:
             raise CLIError(f"{target} is named for two of this command's outputs (the light field, its path "
                            "file, --path-out): give each its own name")
         if target is not None and any(Path(target).resolve() == Path(i).resolve() for i in inputs):
             raise CLIError(f"{target} is the input; an output may not replace it")
+        if target is not None and Path(target).resolve() in beside:
+            raise CLIError(f"{target} holds the camera path of the input {beside[Path(target).resolve()]}; an output "
+                           "may not replace it: give the output another name")
         if target is not None and target.exists() and not overwrite:
             raise CLIError(f"{target} exists; pass --overwrite to replace it")  # the option's name, not the API's
         if target is not None and target.parent not in targets:

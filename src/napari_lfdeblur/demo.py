@@ -179,8 +179,10 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     Parameters
     ----------
     out_dir : str or Path
-        Output folder, created if needed. The demo's own files in it are
-        replaced on every run; nothing else in it is touched.
+        Output folder, created if needed. The demo's own files in it (those
+        its last run's ``summary.json`` lists) are replaced on every run, and
+        those this run does not make (the blind results, after a run without
+        them) are removed; nothing else in it is touched.
     device : {'auto', 'cpu', 'cuda'}
     quick : bool
         Small crops and few iterations (for tests).
@@ -193,6 +195,12 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     -------
     dict
         The summary also written to ``summary.json``.
+
+    Raises
+    ------
+    FileExistsError
+        When the folder holds a file of a name the demo writes that an
+        earlier demo run did not write (before any work).
     """
     from .devices import select_device
 
@@ -200,6 +208,15 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(f"{out} is a file; the demo writes into a folder")
+    samples = _samples(quick)
+    earlier = _earlier_files(out)
+    kinds = ("blurred", "deconvolved", "blind") if blind else ("blurred", "deconvolved")
+    planned = [f"{name}_{kind}{ext}" for name in samples for kind in kinds for ext in (".npz", ".path.json")]
+    planned += [f"{name}.png" for name in samples] + ["summary.json"]
+    theirs = [f for f in planned if (out / f).exists() and f not in earlier]
+    if theirs:
+        raise FileExistsError(f"{out / theirs[0]} exists and is not the demo's (no summary.json of a demo run lists "
+                              "it): the demo replaces only its own files; choose another --out folder")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(0)
     summary = {
@@ -211,7 +228,6 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
         "samples": {},
     }
     files = []
-    samples = _samples(quick)
     bar = progress(total=len(samples) * (3 if blind else 2), desc="demo") if progress else None
     for name, (sharp, source) in samples.items():
         rec = summary["samples"][name] = {"source": source, "shape": list(sharp.shape), "seconds": {}}
@@ -223,4 +239,17 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     summary["files"] = files
     summary["out_dir"] = str(out)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    for name in earlier - set(files):  # an earlier run's results that this run did not make: stale
+        (out / name).unlink(missing_ok=True)
     return summary
+
+
+def _earlier_files(out: Path) -> set:
+    """The files an earlier demo run wrote in ``out`` (its ``summary.json`` lists them); empty when there was none."""
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        return set()
+    if not (isinstance(summary, dict) and "true_control_points" in summary and isinstance(summary.get("files"), list)):
+        return set()
+    return {f for f in summary["files"] if isinstance(f, str) and Path(f).name == f}  # names in the folder only

@@ -334,6 +334,14 @@ def run_batch(specs: list, out_dir: Path, *, client, workers, device, card: dict
     clash = [s["input"] for s in specs if Path(s["input"]).resolve() == Path(s["output"]).resolve()]
     if clash:
         raise ValueError(f"the output of {clash[0]} would replace it: choose another output folder")
+    from ..io._write import path_json_beside
+
+    beside = [(s["input"], path_json_beside(s["input"])) for s in specs]  # an input's own path file
+    clash = [(i, b) for (i, b), s in zip(beside, specs)
+             if b.is_file() and b.resolve() == Path(s["path_json"]).resolve()]
+    if clash:
+        raise ValueError(f"the output of {clash[0][0]} would replace its path file {clash[0][1]}: choose another "
+                         "output folder")
     if out_dir.exists() and not out_dir.is_dir():
         raise NotADirectoryError(f"{out_dir} is a file; a batch writes into a folder")
     created = not out_dir.exists()
