@@ -668,3 +668,19 @@ def test_demo_replaces_only_its_own_files(tmp_path, capsys):
     assert main(["demo", "--out", str(demo), "--quick", "--skip-blind"]) == 0
     assert not (demo / "synthetic_blind.npz").exists()
     assert sorted(json.loads((demo / "summary.json").read_text())["files"]) == sorted(p.name for p in demo.iterdir())
+
+
+def test_errors_give_the_command_lines_options_not_python_keywords(lf_file, tmp_path, capsys):
+    import torch
+
+    lf, src = lf_file
+    np.save(tmp_path / "stack.npy", lf[0])  # 3D: views without their grid
+    assert main(["info", str(tmp_path / "stack.npy")]) == 2
+    err = capsys.readouterr().err
+    assert "pass --grid V,U" in err and "--layout eslf or --layout mosaic" in err and "grid=" not in err
+    assert main(["simulate", str(src), str(tmp_path / "o.txt"), "--path", "linear:1"]) == 2
+    err = capsys.readouterr().err  # no layout= to pass here: the suffix says the format
+    assert "use .npz, .npy, .tif, .h5, a folder name without suffix" in err and "layout=" not in err
+    if not torch.cuda.is_available():
+        assert main(["demo", "--out", str(tmp_path / "d"), "--device", "cuda"]) == 2
+        assert "use --device auto or cpu" in capsys.readouterr().err

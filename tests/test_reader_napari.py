@@ -143,8 +143,11 @@ def test_writer_functions(tmp_path, lf_rgb):
         "a.npz", "a.path.json", "b.path.json", "b.tif", "c.hdf5", "c.path.json"]
     with pytest.raises(LayerNotSaved, match="4D"):
         write_npz(str(tmp_path / "d.npz"), lf_rgb[0, 0], {"name": "img"})
-    with pytest.raises(FileExistsError):
+    # never replaced, and the message says what a napari user can do (it said "pass overwrite=True")
+    with pytest.raises(FileExistsError, match=r"a\.npz exists; napari-lfdeblur never replaces a file: save under a "
+                                              "new name") as caught:
         write_npz(str(tmp_path / "a.npz"), lf_rgb, {"name": "again"})
+    assert "overwrite=" not in str(caught.value)
 
 
 def test_writer_saves_a_layer_with_a_path_in_a_second_format(tmp_path, lf_rgb):
@@ -223,7 +226,7 @@ def test_path_writer(tmp_path):
     back, fields = read_path_json(written)
     np.testing.assert_allclose(back, cp, rtol=0, atol=0)
     assert (fields["n_times"], fields["infinity_disparity"]) == (12, 1.5)
-    with pytest.raises(FileExistsError):
+    with pytest.raises(FileExistsError, match="never replaces a file: save under a new name"):
         write_path_json(written, shapes, kw)
     with pytest.raises(LayerNotSaved, match="'rect' holds no camera path"):
         write_path_json(str(tmp_path / "r.json"), [np.zeros((4, 2))], {"name": "rect", "metadata": {}})

@@ -5,12 +5,13 @@ stores with a light field it computed."""
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CLIError", "check_targets", "DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield",
+__all__ = ["CLIError", "check_targets", "in_cli_words", "DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield",
            "describe_path", "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note",
            "stated_value", "warn_view_mismatch"]
 
@@ -231,3 +232,17 @@ def check_targets(targets, overwrite: bool, inputs=()) -> None:
             raise CLIError(f"{target} exists; pass --overwrite to replace it")  # the option's name, not the API's
         if target is not None and target.parent not in targets:
             check_writable(target, overwrite=True)  # its folder exists
+
+
+#: the library's hints in Python keywords, and their command-line spelling
+_HINTS = ((re.compile(r"grid=\(V, U\)"), "--grid V,U"), (re.compile(r"layout='(\w+)'"), r"--layout \1"),
+          (re.compile(r"device='(\w+)' or '(\w+)'"), r"--device \1 or \2"),
+          (re.compile(r"method='(\w+)'"), r"--method \1"),
+          (re.compile(r", or pass layout= \(one of \([^)]*\)\)"), ""))  # an output's layout is its suffix here
+
+
+def in_cli_words(message: str) -> str:
+    """An error message of the library with its keyword hints (``grid=(V, U)``, ``device='cpu'``) as options."""
+    for pattern, words in _HINTS:
+        message = pattern.sub(words, message)
+    return message

@@ -23,6 +23,7 @@ from ._cli_info import (
     describe,
     describe_lightfield,
     describes,
+    in_cli_words,
     result_metadata,
     rotation_note,
     stated_value,
@@ -474,7 +475,7 @@ def main(argv=None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so that the exit's flush fails no more
         return 141
     except (CLIError, ValueError, TypeError, OSError, OverflowError) as exc:
-        print(f"lfdeblur {args.command}: error: {exc}", file=sys.stderr)
+        print(f"lfdeblur {args.command}: error: {in_cli_words(str(exc))}", file=sys.stderr)
         return 2
     except (MemoryError, RuntimeError) as exc:  # numpy's names the array it could not allocate
         gpu = type(exc).__name__ == "OutOfMemoryError"  # torch's, a RuntimeError: the GPU's memory

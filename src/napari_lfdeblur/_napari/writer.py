@@ -32,13 +32,18 @@ class LayerNotSaved(RuntimeError):
 
 
 def _says_why(write):
-    """The writer ``write``, whose ValueError and TypeError become :class:`LayerNotSaved` (napari shows it)."""
+    """The writer ``write``, whose ValueError and TypeError become :class:`LayerNotSaved` (napari shows it);
+    an existing file's FileExistsError says what a napari user can do (the API's ``overwrite=`` is not theirs)."""
     @functools.wraps(write)
     def writer(*args, **kwargs):
         try:
             return write(*args, **kwargs)
         except (ValueError, TypeError) as exc:
             raise LayerNotSaved(str(exc)) from None
+        except FileExistsError as exc:
+            where = exc.filename or str(exc).split(" exists")[0]
+            raise FileExistsError(f"{where} exists; napari-lfdeblur never replaces a file: save under a new name, "
+                                  "or move that file away") from None
     return writer
 
 
