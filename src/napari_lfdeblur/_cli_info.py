@@ -237,7 +237,6 @@ def check_targets(targets, overwrite: bool, inputs=()) -> None:
 #: the library's hints in Python keywords, and their command-line spelling
 _HINTS = ((re.compile(r"grid=\(V, U\)"), "--grid V,U"), (re.compile(r"layout='(\w+)'"), r"--layout \1"),
           (re.compile(r"device='(\w+)' or '(\w+)'"), r"--device \1 or \2"),
-          (re.compile(r"method='(\w+)'"), r"--method \1"),
           (re.compile(r", or pass layout= \(one of \([^)]*\)\)"), ""))  # an output's layout is its suffix here
 
 
