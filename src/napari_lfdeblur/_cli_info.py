@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CLIError", "check_targets", "in_cli_words", "DEFAULT_N_TIMES", "describes", "describe", "describe_lightfield",
-           "describe_path", "describe_path_file", "describe_batch_folder", "result_metadata", "rotation_note",
-           "stated_value", "warn_view_mismatch"]
+__all__ = ["CLIError", "check_targets", "in_cli_words", "DEFAULT_N_TIMES", "describes", "describe",
+           "describe_lightfield", "describe_path", "describe_path_file", "describe_batch_folder", "result_metadata",
+           "rotation_note", "stated_value", "warn_view_mismatch"]
 
 #: Instants a path is sampled at when its file does not state ``n_times`` (``info``, ``simulate``, ``deconvolve``)
 DEFAULT_N_TIMES = 32

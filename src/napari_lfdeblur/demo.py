@@ -210,10 +210,10 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
         raise NotADirectoryError(f"{out} is a file; the demo writes into a folder")
     samples = _samples(quick)
     earlier = _earlier_files(out)
-    kinds = ("blurred", "deconvolved", "blind") if blind else ("blurred", "deconvolved")
-    planned = [f"{name}_{kind}{ext}" for name in samples for kind in kinds for ext in (".npz", ".path.json")]
-    planned += [f"{name}.png" for name in samples] + ["summary.json"]
-    theirs = [f for f in planned if (out / f).exists() and f not in earlier]
+    every = {f"{name}_{kind}{ext}" for name in samples for kind in ("blurred", "deconvolved", "blind")
+             for ext in (".npz", ".path.json")} | {f"{name}.png" for name in samples} | {"summary.json"}
+    planned = {f for f in every if blind or "_blind." not in f}
+    theirs = sorted(f for f in planned if (out / f).exists() and f not in earlier)
     if theirs:
         raise FileExistsError(f"{out / theirs[0]} exists and is not the demo's (no summary.json of a demo run lists "
                               "it): the demo replaces only its own files; choose another --out folder")
@@ -239,7 +239,7 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     summary["files"] = files
     summary["out_dir"] = str(out)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    for name in earlier - set(files):  # an earlier run's results that this run did not make: stale
+    for name in (earlier & every) - set(files):  # an earlier run's results that this run did not make: stale
         (out / name).unlink(missing_ok=True)
     return summary
 
