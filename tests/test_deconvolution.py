@@ -900,3 +900,12 @@ def test_cli_deconvolve_takes_the_path_the_input_holds(tmp_path, capsys):
     last = capsys.readouterr().err.strip().splitlines()[-1]  # (random views may also draw a view-order warning)
     assert "error" in last and "holds no camera path" in last and "PATH.json" in last
     assert not (tmp_path / "o.npz").exists()
+
+
+def test_inplane_refuses_what_it_cannot_solve_and_says_what_to_use():
+    lf = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
+    cp = [[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0]]
+    for kwargs in ({"infinity_disparity": 0.5}, {"control_points": [[-0.5, 0.0, 0.2], [0.5, 0.0, -0.2]]}):
+        args = {"control_points": cp, **kwargs}
+        with pytest.raises(ValueError, match=r"needs an in-plane path .* Use method 'tv' \(command line: --method tv\)"):
+            deconvolve(lf, args.pop("control_points"), n_times=4, method="inplane", **args)

@@ -357,7 +357,7 @@ def _choose_method(method: str, cp: np.ndarray, d_inf: float) -> str:
         raise ValueError(
             "method 'inplane' needs an in-plane path (p_z = 0 and no rotation at every control point) and "
             f"infinity_disparity = 0; got max |p_z| = {np.abs(cp[:, 2]).max():g}, d_inf = {d_inf:g}"
-            f"{', a rotation' if has_rotation(cp) else ''}. Use method='tv'."
+            f"{', a rotation' if has_rotation(cp) else ''}. Use method 'tv' (command line: --method tv)."
         )
     return method
 
