@@ -192,7 +192,7 @@ def test_a_rerun_skips_finished_items_and_redoes_the_others(client, inputs, tmp_
     assert np.array_equal(read_lightfield(out / "scene2_0000.npz"), before)
     fourth = simulate_dataset(inputs, out, n_per_input=2, client=client, device="cpu", overwrite=True)
     assert fourth.n_ok == 6
-    # an item whose path file was lost since is redone (it failed as 'not this item's output', at every rerun)
+    # an item whose path file was lost since is redone (not refused as 'not this item's output')
     (out / "scene1_0000.path.json").unlink()
     fifth = simulate_dataset(inputs, out, n_per_input=2, client=client, device="cpu")
     assert (fifth.n_ok, fifth.n_skipped, fifth.n_failed) == (1, 5, 0) and (out / "scene1_0000.path.json").is_file()

@@ -1291,12 +1291,12 @@ def test_blind_deblur_leaves_the_global_random_generators_alone(linear_case):
     torch_state, numpy_state = torch.get_rng_state(), np.random.get_state()
     p = BlindParams().replace(n_control_points=2, **FAST).replace(final=None)
     blind_deblur(blurred, params=p, device="cpu", seed=3)
-    assert torch.equal(torch.get_rng_state(), torch_state)  # it was reseeded with the solver's seed
+    assert torch.equal(torch.get_rng_state(), torch_state)  # not reseeded with the solver's seed
     assert all(np.array_equal(a, b) for a, b in zip(np.random.get_state(), numpy_state))
 
 
 def test_joint_and_final_settings_are_checked_and_named():
-    with pytest.raises(ValueError, match="BlindParams.joint.n_iter must be >= 1"):  # 0 returned the random start
+    with pytest.raises(ValueError, match="BlindParams.joint.n_iter must be >= 1"):  # 0 would return the random start
         BlindParams().replace(joint={"n_iter": 0})
     with pytest.raises(ValueError, match="prior_floor is a fraction of the start, at most 1"):
         BlindParams().replace(joint={"prior_floor": 5.0})

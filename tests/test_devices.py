@@ -18,7 +18,7 @@ def test_select_device():
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match="no CUDA"):
             select_device("cuda")
-    # a torch.device is checked like its name (it was returned as is, to fail later inside torch)
+    # a torch.device is checked like its name (not left to fail later inside torch)
     for kind in ("meta", "mps"):
         with pytest.raises(ValueError, match="unknown device"):
             select_device(torch.device(kind))
@@ -43,13 +43,13 @@ def test_blur_operator_refuses_other_dtypes_and_devices():
     from napari_lfdeblur.blur import BlurOperator
 
     cp = [[-1.5, 0.0, 0.0], [1.5, 0.0, 0.0]]
-    with pytest.raises(TypeError, match="floating-point torch dtype"):  # truncated the path to whole views
+    with pytest.raises(TypeError, match="floating-point torch dtype"):  # an integer dtype would round the path to views
         BlurOperator((3, 3, 8, 8), cp, n_times=4, dtype=torch.int32)
     with pytest.raises(TypeError, match="floating-point torch dtype"):
         BlurOperator((3, 3, 8, 8), cp, n_times=4, dtype="float32")
     op = BlurOperator((3, 3, 8, 8), cp, n_times=4, device="cpu")
     x = torch.rand(3, 3, 8, 8, 1)
-    with pytest.raises(TypeError, match="dtype torch.float32"):  # an integer tensor came out all zeros
+    with pytest.raises(TypeError, match="dtype torch.float32"):  # not blurred in integers
         op.forward((100 * x).to(torch.int32))
     with pytest.raises(TypeError, match="dtype torch.float32"):
         op.adjoint(x.double())

@@ -194,7 +194,7 @@ def test_integer_inputs_are_scored_on_their_dtypes_range():
     ref = rng.integers(0, 256, (3, 3, 16, 16)).astype(np.uint8)
     est = np.clip(ref.astype(int) + rng.integers(-3, 4, ref.shape), 0, 255).astype(np.uint8)
     mse = np.mean((est.astype(float) - ref) ** 2)
-    assert psnr(est, ref) == pytest.approx(10 * np.log10(255.0**2 / mse))  # was scored on [0, 1]: about -22 dB
+    assert psnr(est, ref) == pytest.approx(10 * np.log10(255.0**2 / mse))  # not on [0, 1] (about -22 dB)
     assert psnr(est, ref) == pytest.approx(psnr(est / 255.0, ref / 255.0))
     assert ssim(est, ref) == pytest.approx(ssim(est / 255.0, ref / 255.0))
     wide = ref.astype(np.uint16)

@@ -87,7 +87,7 @@ def test_bad_arguments():
         procedural_scene((3, 3, 16, 16))  # the seed is required
     with pytest.raises(ValueError, match="seed must be a whole number from 0"):
         procedural_scene((3, 3, 16, 16), seed=-1)
-    with pytest.raises(ValueError, match="infinity_disparity = 1e\\+06 px/view is beyond"):  # was a MemoryError
+    with pytest.raises(ValueError, match="infinity_disparity = 1e\\+06 px/view is beyond"):  # before any allocation
         procedural_scene((3, 3, 16, 16), seed=0, infinity_disparity=1e6)
     with pytest.raises(ValueError, match="shape"):
         procedural_scene((3, 3, 16.5, 16), seed=0)

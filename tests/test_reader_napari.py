@@ -143,7 +143,7 @@ def test_writer_functions(tmp_path, lf_rgb):
         "a.npz", "a.path.json", "b.path.json", "b.tif", "c.hdf5", "c.path.json"]
     with pytest.raises(LayerNotSaved, match="4D"):
         write_npz(str(tmp_path / "d.npz"), lf_rgb[0, 0], {"name": "img"})
-    # never replaced, and the message says what a napari user can do (it said "pass overwrite=True")
+    # never replaced, and the message says what a napari user can do (not the API's overwrite=True)
     with pytest.raises(FileExistsError, match=r"a\.npz exists; napari-lfdeblur never replaces a file: save under a "
                                               "new name") as caught:
         write_npz(str(tmp_path / "a.npz"), lf_rgb, {"name": "again"})

@@ -75,7 +75,7 @@ def test_synthetic_scene_bad_input():
     with pytest.raises(TypeError, match="n_layers"):
         synthetic_scene((5, 5, 8, 8), n_layers=2.5)
     with pytest.raises(ValueError, match="shape"):
-        synthetic_scene((5, 5, 8.7, 8))  # was truncated to 8
+        synthetic_scene((5, 5, 8.7, 8))  # not truncated to 8
     # the farther layer first: the other way round, it would occlude the nearer one
     with pytest.raises(ValueError, match="farthest layer's disparity first"):
         synthetic_scene((3, 3, 32, 32), n_layers=2, disparity_range=(2.0, -1.0))
@@ -83,7 +83,7 @@ def test_synthetic_scene_bad_input():
         synthetic_scene((3, 3, 32, 32), disparity_range=(float("nan"), 1.0))
     with pytest.raises(ValueError, match="two numbers"):
         synthetic_scene((3, 3, 32, 32), disparity_range=(1.0,))
-    with pytest.raises(ValueError, match="more than half the view"):  # was a MemoryError
+    with pytest.raises(ValueError, match="more than half the view"):  # before any allocation
         synthetic_scene((3, 3, 32, 32), disparity_range=(0.0, 1e4))
     with pytest.raises(ValueError, match="seed"):
         synthetic_scene((3, 3, 8, 8), seed=-1)
@@ -323,7 +323,7 @@ def test_path_json_round_trip_and_no_overwrite(tmp_path):
         load_path_json(tmp_path / "short.json")
     with pytest.raises(FileNotFoundError, match="missing.json does not exist"):
         load_path_json(tmp_path / "missing.json")
-    with pytest.raises(FileNotFoundError, match="is a folder"):  # it said 'does not exist' of an existing folder
+    with pytest.raises(FileNotFoundError, match="is a folder"):  # not 'does not exist': the folder exists
         load_path_json(tmp_path)
     # with its fields: those save_path_json stored, none for a bare list
     from napari_lfdeblur.path import read_path_json

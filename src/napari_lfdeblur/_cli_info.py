@@ -218,19 +218,20 @@ def check_targets(targets, overwrite: bool, inputs=()) -> None:
     from .io._write import path_json_beside
 
     named = [Path(t).resolve() for t in targets if t is not None]
-    beside = {path_json_beside(i).resolve(): i for i in inputs if path_json_beside(i).is_file()}
-    for target in targets:
-        if target is not None and named.count(Path(target).resolve()) > 1:
+    beside = {b.resolve(): i for i in inputs if (b := path_json_beside(i)).is_file()}
+    for target in (t for t in targets if t is not None):
+        where = Path(target).resolve()
+        if named.count(where) > 1:
             raise CLIError(f"{target} is named for two of this command's outputs (the light field, its path "
                            "file, --path-out): give each its own name")
-        if target is not None and any(Path(target).resolve() == Path(i).resolve() for i in inputs):
+        if any(where == Path(i).resolve() for i in inputs):
             raise CLIError(f"{target} is the input; an output may not replace it")
-        if target is not None and Path(target).resolve() in beside:
-            raise CLIError(f"{target} holds the camera path of the input {beside[Path(target).resolve()]}; an output "
-                           "may not replace it: give the output another name")
-        if target is not None and target.exists() and not overwrite:
+        if where in beside:
+            raise CLIError(f"{target} holds the camera path of the input {beside[where]}; an output may not replace "
+                           "it: give the output another name")
+        if target.exists() and not overwrite:
             raise CLIError(f"{target} exists; pass --overwrite to replace it")  # the option's name, not the API's
-        if target is not None and target.parent not in targets:
+        if target.parent not in targets:
             check_writable(target, overwrite=True)  # its folder exists
 
 

@@ -120,7 +120,8 @@ def _deltas(rng, n_layers: int) -> np.ndarray:
     return np.concatenate([[far], inner, [near]])[:n_layers] if n_layers > 1 else np.array([far])
 
 
-def _check(shape, seed, infinity_disparity, n_layers):
+def _check(shape, seed, infinity_disparity, n_layers) -> tuple:
+    """The arguments checked; returns ``(V, U, Y, X)`` as ints."""
     shape = check_view_grid(shape)
     check_seed(seed)
     if not isinstance(infinity_disparity, numbers.Real) or not math.isfinite(infinity_disparity):
@@ -128,6 +129,7 @@ def _check(shape, seed, infinity_disparity, n_layers):
     check_infinity_disparity(infinity_disparity, shape)
     if n_layers is not None and (not isinstance(n_layers, numbers.Integral) or n_layers < 1):
         raise ValueError(f"n_layers must be a positive int or None; got {n_layers!r}")
+    return shape
 
 
 def procedural_scene(
@@ -205,8 +207,7 @@ def procedural_scene(
     >>> bool(disp.min() > -0.5)
     True
     """
-    _check(shape, seed, infinity_disparity, n_layers)
-    V, U, Y, X = check_view_grid(shape)
+    V, U, Y, X = _check(shape, seed, infinity_disparity, n_layers)
     d_inf = float(infinity_disparity)
     rng = np.random.default_rng([seed, 0x1F5CE])
     n = int(rng.integers(3, 7)) if n_layers is None else int(n_layers)
