@@ -92,6 +92,33 @@ def test_simulate_equals_the_serial_api_bit_for_bit(client, inputs, tmp_path):
     assert "simulate_dataset" in (tmp_path / "README.md").read_text()
 
 
+def test_simulate_item_adds_gaussian_noise_of_the_stated_sigma_on_the_light_fields_scale():
+    lf = np.full((3, 3, 32, 32), 0.5, np.float32)  # flat: the blur leaves it, the noise is all the difference
+    out, _ = simulate_item(lf, "a", 0, noise=0.02)
+    residual = out - 0.5
+    assert abs(residual.std() / 0.02 - 1) < 0.05 and abs(residual.mean()) < 0.002
+    # near white, the clipping to [0, 1] shows
+    out, _ = simulate_item(np.full_like(lf, 0.99), "a", 0, noise=0.02)
+    assert out.max() == 1.0 and 0.3 < (out == 1.0).mean() < 0.4  # P(N(0, 0.02) > 0.01) = 0.31
+    # an integer light field (simulate_blur keeps its scale): noise and clipping on its range, 0..255
+    out, _ = simulate_item(np.full(lf.shape, 128, np.uint8), "a", 0, noise=0.02)
+    assert abs((out - 128).std() / (0.02 * 255) - 1) < 0.05 and 0 <= out.min() and out.max() <= 255
+
+
+def test_draw_path_draws_sizes_and_directions_from_the_stated_ranges():
+    from napari_lfdeblur.batch import draw_path
+    from napari_lfdeblur.path import bezier_positions
+
+    rng = np.random.default_rng(0)
+    ends = np.array([np.diff(draw_path("linear", (1.0, 3.0), rng)[:, :2], axis=0)[0] for _ in range(60)])
+    lengths, angles = np.hypot(*ends.T), np.degrees(np.arctan2(ends[:, 1], ends[:, 0])) % 360
+    assert lengths.min() >= 1.0 and lengths.max() <= 3.0 and lengths.min() < 1.3 and lengths.max() > 2.7
+    assert np.histogram(angles, bins=4, range=(0, 360))[0].min() >= 8  # every quadrant: a uniform angle
+    for kind in ("linear", "arc"):  # a fixed extent is the length of these, exactly
+        pos = bezier_positions(draw_path(kind, 2.0, rng), 2)
+        assert np.isclose(np.linalg.norm(pos[-1, :2] - pos[0, :2]), 2.0)
+
+
 def test_deblur_equals_the_serial_api_bit_for_bit(client, tmp_path):
     rng = np.random.default_rng(1)
     paths = [write_lightfield(tmp_path / f"b{i}.npz", rng.random((3, 3, 16, 16)).astype(np.float32))
@@ -474,6 +501,9 @@ def test_outputs_state_their_blur_and_other_files_are_never_replaced(client, inp
     # the output says what it was blurred with, so that deblurring it takes its infinity disparity
     meta = read_lightfield_with_metadata(out / "scene2_0000.npz")[1]
     assert (meta["infinity_disparity"], meta["n_times"]) == (1.0, 8)
+    cp = load_path_json(out / "scene2_0000.path.json")  # and it was blurred with what it states
+    want = _serial(lambda: simulate_blur(read_lightfield(inputs[2]), cp, n_times=8, infinity_disparity=1.0))
+    assert np.array_equal(read_lightfield(out / "scene2_0000.npz"), want)
     assert json.loads((out / "scene2_0000.path.json").read_text())["lightfield"] == "scene2_0000.npz"
     deblur_many(out / "scene2_0000.npz", tmp_path / "deblurred", params=TINY, client=client, device="cpu")
     assert json.loads((tmp_path / "deblurred" / "scene2_0000.path.json").read_text())["infinity_disparity"] == 1.0

@@ -204,6 +204,8 @@ def test_operator_rejects_wrong_shape():
     with pytest.raises(ValueError, match="shape"):
         op.forward(torch.zeros(3, 3, 4, 5, 1))
     assert to_tensor(np.zeros((3, 3, 4, 4))).shape == (3, 3, 4, 4, 1)
+    with pytest.raises(ValueError, match="whole numbers"):  # not truncated to (3, 3, 4, 4)
+        BlurOperator((3.7, 3, 4, 4), [[0, 0, 0], [1, 0, 0]], n_times=3, device="cpu")
 
 
 def test_in_plane_blur_is_one_angular_matrix_per_pixel():
@@ -305,6 +307,18 @@ def test_a_read_only_light_field_is_blurred_without_a_warning():
     np.testing.assert_array_equal(out, simulate_blur(lf, [[-1.0, 0.0, 0.0], [1.0, 0.5, 0.0]], n_times=8))
 
 
+def test_arrays_of_any_byte_order_or_float_width_and_tensors_with_grad_are_blurred_as_their_values():
+    lf = np.random.default_rng(0).random((3, 3, 8, 8))
+    cp = [[-1.0, 0.0, 0.2], [1.0, 0.5, 0.0]]
+    want = simulate_blur(lf.astype(np.float32), cp, n_times=8)
+    # big-endian data (FITS, MATLAB, HDF5 files), numpy's long double, a tensor that requires grad
+    for other in (lf.astype(">f4"), lf.astype(">f8"), lf.astype(np.longdouble), torch.tensor(lf, requires_grad=True)):
+        np.testing.assert_allclose(simulate_blur(other, cp, n_times=8), want, atol=1e-6)
+    # control points in a tensor that requires grad, as an optimiser holds them
+    np.testing.assert_array_equal(simulate_blur(lf, torch.tensor(cp, requires_grad=True), n_times=8),
+                                  simulate_blur(lf, cp, n_times=8))
+
+
 def test_the_fused_loops_leave_numbas_thread_count_as_it_was():
     numba = pytest.importorskip("numba")
     from napari_lfdeblur import _fused
@@ -317,7 +331,10 @@ def test_the_fused_loops_leave_numbas_thread_count_as_it_was():
         torch.set_num_threads(2)
         lf = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
         simulate_blur(lf, [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], n_times=4)
-        assert numba.get_num_threads() == 1  # it ran with torch's 2 (where numba has them), then put 1 back
+        assert numba.get_num_threads() == 1  # put back after the loops
+        seen = []  # and a loop runs with torch's 2 threads (where numba has them)
+        _fused.call(lambda: seen.append(numba.get_num_threads()))
+        assert seen == [min(2, numba.config.NUMBA_NUM_THREADS)] and numba.get_num_threads() == 1
     finally:
         numba.set_num_threads(before_numba)
         torch.set_num_threads(before_torch)

@@ -62,6 +62,13 @@ def test_simulate_with_json_path_and_no_overwrite(lf_file, tmp_path, capsys):
     assert "is the input; an output may not replace it" in capsys.readouterr().err
     assert main(["deconvolve", str(out), str(tmp_path / "path.json"), str(out), "--overwrite"]) == 2
     assert "is the input" in capsys.readouterr().err and src.read_bytes() == kept and out.read_bytes() == before
+    # the --path file is an input too: an output whose path file it would be is refused
+    save_path_json(tmp_path / "c.path.json", cp, n_times=9, note="my own notes")
+    stated = (tmp_path / "c.path.json").read_bytes()
+    assert main(["simulate", str(src), str(tmp_path / "c.npy"), "--path", str(tmp_path / "c.path.json"),
+                 "--overwrite"]) == 2
+    assert "c.path.json is the input" in capsys.readouterr().err
+    assert (tmp_path / "c.path.json").read_bytes() == stated and not (tmp_path / "c.npy").exists()
 
 
 def test_a_path_for_views_of_another_size_is_warned_about(lf_file, tmp_path, capsys):
@@ -103,6 +110,7 @@ def test_a_path_for_views_of_another_size_is_warned_about(lf_file, tmp_path, cap
         (["simulate", "{src}", "o.npz", "--path", "nothere.json"], "does not exist"),
         (["simulate", "{src}", "o.npz", "--path", "shake:1:0:0.01"], "only shake6 takes a ROTATION"),
         (["simulate", "{src}", "o.npz", "--path", "shake6:1:0:0.5"], "rotation must be in [0, 0.2]"),
+        (["simulate", "{src}", "o.npz", "--path", "linear:3:7"], "linear is not random and takes no SEED"),
         (["simulate", "{src}", "no/o.npz", "--path", "linear"], "the folder no does not exist"),
         (["simulate", "{src}", "o.gif", "--path", "linear"], "cannot tell the format"),
         (["deblur", "{src}", "o.npz", "--preset", "paper", "--motion", "6dof"], "needs method='alternating'"),
@@ -114,7 +122,7 @@ def test_cli_errors_are_one_line(args, message, lf_file, tmp_path, capsys, monke
     code = main([a.format(src=src) for a in args])
     err = capsys.readouterr().err
     assert code == 2
-    assert message in err and "Traceback" not in err
+    assert message in err and err.startswith(f"lfdeblur {args[0]}: error: ") and err.count("\n") == 1, err
     assert not (tmp_path / "o.npz").exists()
 
 

@@ -610,6 +610,13 @@ def test_inplane_psf_reproduces_the_blur_of_a_plane():
     np.testing.assert_allclose(c[6:-6, 6:-6], b[3, 3, 6:-6, 6:-6], atol=1e-5)
     flipped = ndimage.convolve(lf[3, 3].astype(np.float64), psf[::-1, ::-1], mode="nearest")
     assert np.abs(flipped - b[3, 3])[6:-6, 6:-6].max() > 1e-2
+    # a larger window holds the same PSF, centred; one that would cut taps off is refused (not renormalised)
+    big = inplane_psf(cp, 1.0, n_times=16, size=psf.shape[0] + 4)
+    np.testing.assert_array_equal(big[2:-2, 2:-2], psf)
+    assert big.sum() == pytest.approx(1.0) and not big[:2].any() and not big[:, -2:].any()
+    for size, words in ((3, "cuts off the PSF"), (0, "whole number >= 1"), (5.0, "whole number >= 1")):
+        with pytest.raises(ValueError, match=words):
+            inplane_psf([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], 10.0, n_times=3, size=size)
 
 
 def test_4d_beats_2d_and_the_gap_grows_with_blur_length():

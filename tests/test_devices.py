@@ -23,6 +23,8 @@ def test_select_device():
         with pytest.raises(ValueError, match="unknown device"):
             select_device(torch.device(kind))
     assert select_device(torch.device("cpu")) == torch.device("cpu")
+    with pytest.raises(ValueError, match="the CPU is 'cpu'"):  # torch has no second CPU device
+        select_device("cpu:1")
 
 
 def test_cuda_index_must_be_a_gpu_present(monkeypatch):

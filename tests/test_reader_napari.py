@@ -5,6 +5,7 @@ The viewer tests need Qt; run them with ``xvfb-run -a python -m pytest``.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -128,6 +129,22 @@ def test_reader_opens_the_light_field_when_its_path_is_unusable(tmp_path, lf_rgb
         ((data, kw, kind),) = read_lightfield_layer(tmp_path / "odd.npz")
     np.testing.assert_array_equal(data, lf_rgb)
     assert "control_points" not in kw["metadata"]  # not offered to the widgets as a path
+
+
+@pytest.mark.parametrize("n_times", [8.9, "8", 0])
+def test_reader_draws_no_path_whose_n_times_is_stated_badly(tmp_path, lf_rgb, n_times):
+    """A path whose n_times is stated badly (lfdeblur refuses it) is not drawn at another number of
+    instants: the light field opens alone, its metadata as the file states it."""
+    from napari_lfdeblur._napari.reader import read_lightfield_layer
+
+    np.save(tmp_path / "b.npy", lf_rgb)
+    (tmp_path / "b.path.json").write_text(json.dumps({"control_points": [[0, 0, 0], [1, 0, 0]], "n_times": n_times}))
+    layers = read_lightfield_layer(tmp_path / "b.npy")
+    assert [k for *_, k in layers] == ["image"] and layers[0][1]["metadata"]["n_times"] == n_times
+    # a file that holds its path itself, with a bad n_times, opens with no path layer either
+    doc = {"control_points": [[0.0, 0, 0], [1, 0, 0]], "n_times": n_times}
+    np.savez(tmp_path / "c.npz", lf=lf_rgb, lfdeblur_metadata=np.array(json.dumps(doc)))
+    assert [k for *_, k in read_lightfield_layer(tmp_path / "c.npz")] == ["image"]
 
 
 def test_writer_functions(tmp_path, lf_rgb):

@@ -184,6 +184,14 @@ def test_bezier_positions_match_bernstein_formula():
         np.testing.assert_allclose(pos[k], bezier_reference(cp, k / 8), atol=1e-12)
     np.testing.assert_allclose(pos[0], cp[0])
     np.testing.assert_allclose(pos[-1], cp[-1])
+    # a torch tensor gives the same positions, one of integers too (not weights truncated to 0 or 1)
+    import torch
+
+    np.testing.assert_allclose(bezier_positions(torch.from_numpy(cp), 9).numpy(), pos, atol=1e-12)
+    np.testing.assert_array_equal(bezier_positions(torch.tensor([[0, 0, 0], [2, 0, 0]]), 3).numpy(),
+                                  [[0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        bezier_positions(torch.tensor([[0.0, 0, float("nan")], [2, 0, 0]]), 3)
 
 
 def test_presets():
@@ -195,6 +203,10 @@ def test_presets():
     np.testing.assert_allclose(center_path(arc_path() + 7.0), arc_path(), atol=1e-12)
     with pytest.raises(ValueError, match="unknown path preset"):
         preset_path("zigzag")
+    # a seed is checked whether or not the preset draws from it (linear and arc do not)
+    for bad in ("x", -5, 1.5):
+        with pytest.raises((TypeError, ValueError), match="the path's seed must be"):
+            preset_path("linear", seed=bad)
 
 
 @pytest.mark.parametrize("make, message", [
@@ -228,6 +240,14 @@ def test_elevate_degree_keeps_the_curve():
     up = elevate_degree(cp, 5)
     assert up.shape == (5, 3)
     np.testing.assert_allclose(bezier_positions(up, 33), bezier_positions(cp, 33), atol=1e-12)
+    # the functions that may return the path unchanged return a new array, never the caller's own
+    from napari_lfdeblur.path import canonical_time_direction, validate_control_points
+
+    for same in (elevate_degree(cp, 3), canonical_time_direction(cp), validate_control_points(cp)):
+        assert not np.shares_memory(same, cp)
+        np.testing.assert_array_equal(same, cp)
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        canonical_time_direction([[0.0, 0, np.nan], [1, 0, 0]])
 
 
 def test_canonical_time_direction():
@@ -335,3 +355,19 @@ def test_path_json_round_trip_and_no_overwrite(tmp_path):
     cp3, fields = read_path_json(tmp_path / "bare.json")
     np.testing.assert_array_equal(cp3, cp)
     assert fields == {}
+
+
+@pytest.mark.parametrize("doc, words", [
+    ({"control_points": [["1", 0, 0], [0, 0, 0]]}, "control points must be numbers; got '1'"),
+    ({"control_points": [[True, 0, 0], [0, 0, 0]]}, "control points must be numbers; got True"),
+])
+def test_a_path_files_control_points_are_json_numbers(tmp_path, doc, words):
+    """The control points of a path file are JSON numbers, as save_path_json writes them: a string or a
+    boolean is refused, naming the file, not taken as a number."""
+    from napari_lfdeblur.path import read_path_json
+
+    f = tmp_path / "odd.json"
+    f.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="odd.json") as err:
+        read_path_json(f)
+    assert words in str(err.value)

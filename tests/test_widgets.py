@@ -772,22 +772,38 @@ def test_path_json_file_fills_the_table(make_napari_viewer, tmp_path, notificati
     viewer = make_napari_viewer()
     w = _dock(viewer, DeconvolveWidget(viewer))
     w.path_source.json_file.value = tmp_path / "p.json"
-    np.testing.assert_allclose(w.table.control_points(), cp, atol=1e-5)
+    # the table shows 6 digits but holds the file's numbers exactly (arc_path's are not 6-digit numbers)
+    assert [w.table.table.native.item(i, 1).text() for i in range(3)] == ["-0.387097", "0.812903", "-0.387097"]
+    assert w.table.table.native.item(1, 0).text() == "0.0"  # not 6.93889e-18
+    np.testing.assert_array_equal(w.table.control_points(), cp)
     assert (w.form.n_times.value, w.form.infinity_disparity.value) == (32, 0.0)  # the file states neither
     # the T and d_inf a file states reach the form, as a layer's do
     save_path_json(tmp_path / "q.json", cp[::-1], n_times=12, infinity_disparity=-0.5)
     w.path_source.json_file.value = tmp_path / "q.json"
-    np.testing.assert_allclose(w.table.control_points(), cp[::-1], atol=1e-5)
+    np.testing.assert_array_equal(w.table.control_points(), cp[::-1])
     assert (w.form.n_times.value, w.form.infinity_disparity.value) == (12, -0.5)
     assert not notifications
-    # values the form cannot take are left out with a warning; the path is still taken
-    (tmp_path / "bad.json").write_text(json.dumps(
-        {"control_points": cp.tolist(), "n_times": 7.5, "infinity_disparity": 50.0}))
-    w.path_source.json_file.value = tmp_path / "bad.json"
-    np.testing.assert_allclose(w.table.control_points(), cp, atol=1e-5)
-    assert (w.form.n_times.value, w.form.infinity_disparity.value) == (12, -0.5)
-    assert [kind for kind, _ in notifications] == ["warning", "warning"]
-    assert "n_times = 7.5" in notifications[0][1] and "infinity_disparity = 50.0" in notifications[1][1]
+    # the same file, changed on disk, is read again by *Load path file* (choosing it again changes nothing)
+    save_path_json(tmp_path / "q.json", 2 * cp, n_times=10, overwrite=True)
+    w.path_source.json_file.value = tmp_path / "q.json"
+    np.testing.assert_array_equal(w.table.control_points(), cp[::-1])
+    w.path_source.load_button.clicked.emit()
+    np.testing.assert_array_equal(w.table.control_points(), 2 * cp)
+    assert w.form.n_times.value == 10 and not notifications
+    # values the form cannot take (lfdeblur refuses them too: no 8.0 or '8' for T) are left out with a
+    # warning; the path is still taken
+    for i, n_times in enumerate((7.5, 8.0, "8")):
+        (tmp_path / "bad.json").write_text(json.dumps(
+            {"control_points": (3 * cp).tolist(), "n_times": n_times, "infinity_disparity": 50.0}))
+        if i == 0:
+            w.path_source.json_file.value = tmp_path / "bad.json"
+        else:
+            w.path_source.load_button.clicked.emit()
+        np.testing.assert_array_equal(w.table.control_points(), 3 * cp)
+        assert (w.form.n_times.value, w.form.infinity_disparity.value) == (10, -0.5)
+        assert [kind for kind, _ in notifications] == ["warning", "warning"]
+        assert f"n_times = {n_times!r}" in notifications[0][1] and "infinity_disparity = 50.0" in notifications[1][1]
+        notifications.clear()
 
 
 def test_simulate_takes_a_path_from_a_json_file_or_a_layer(make_napari_viewer, qtbot, lf, tmp_path, notifications):

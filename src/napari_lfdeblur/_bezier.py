@@ -28,7 +28,7 @@ MAX_ROTATION = 0.2
 
 
 def validate_control_points(control_points) -> np.ndarray:
-    """Check control points and return them as a float64 ``(n, 3)`` or ``(n, 6)`` array.
+    """Check control points and return them as a new float64 ``(n, 3)`` or ``(n, 6)`` array.
 
     Columns are ``(p_x, p_y, p_z)`` or ``(p_x, p_y, p_z, r_x, r_y, r_z)``.
 
@@ -39,6 +39,8 @@ def validate_control_points(control_points) -> np.ndarray:
         or Inf or values beyond float32's range, or a rotation beyond
         ``MAX_ROTATION`` radians.
     """
+    if hasattr(control_points, "detach") and hasattr(control_points, "cpu"):  # a torch tensor, with grad too
+        control_points = control_points.detach().cpu().numpy()
     try:
         cp = np.asarray(control_points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -62,7 +64,7 @@ def validate_control_points(control_points) -> np.ndarray:
             f"rotations must stay within {MAX_ROTATION} rad ({math.degrees(MAX_ROTATION):.1f} degrees), "
             f"where the small-angle model holds; got {np.abs(cp[:, 3:]).max():.3g} rad"
         )
-    return np.ascontiguousarray(cp)
+    return np.array(cp, order="C")  # a copy: never the caller's own array
 
 
 def has_rotation(control_points) -> bool:
@@ -116,8 +118,8 @@ def bezier_positions(control_points, n_times: int):
     Parameters
     ----------
     control_points : array_like or torch.Tensor, shape (n, 3) or (n, 6)
-        A torch tensor stays a tensor (differentiable); anything else gives
-        a numpy array.
+        A torch tensor stays a tensor (differentiable; one of integers
+        becomes float64); anything else gives a numpy array.
     n_times : int
         Number of instants ``T >= 2``.
 
@@ -142,6 +144,10 @@ def bezier_positions(control_points, n_times: int):
             raise ValueError(
                 f"control points must be an (n, 3) or (n, 6) tensor with n >= 2; got {tuple(control_points.shape)}"
             )
+        if not control_points.is_floating_point():
+            control_points = control_points.to(torch.float64)  # as a numpy array of integers is read
+        if not bool(torch.isfinite(control_points.detach()).all()):
+            raise ValueError("control points contain NaN or Inf")
         basis = torch.as_tensor(
             bernstein_matrix(control_points.shape[0], n_times),
             dtype=control_points.dtype,
@@ -216,12 +222,15 @@ def canonical_time_direction(control_points) -> np.ndarray:
 
     Returns
     -------
-    ndarray, float64, the shape given
+    ndarray, float64, the shape given (a new array)
+
+    Raises
+    ------
+    ValueError
+        If the control points are not valid (:func:`validate_control_points`).
     """
-    cp = np.asarray(control_points, dtype=np.float64)
+    cp = validate_control_points(control_points)
     d = cp[-1] - cp[0]
     if np.any(d[:3] != 0):
         d = d[:3]
-    if d[np.argmax(np.abs(d))] < 0:
-        cp = cp[::-1].copy()
-    return cp
+    return cp[::-1].copy() if d[np.argmax(np.abs(d))] < 0 else cp

@@ -153,7 +153,7 @@ def validate_lightfield(lf, name: str = "light field", *, finite: bool = True) -
     Returns
     -------
     ndarray
-        ``np.asarray(lf)``.
+        ``np.asarray(lf)`` (a torch tensor's data, detached, on the CPU).
 
     Raises
     ------
@@ -161,6 +161,8 @@ def validate_lightfield(lf, name: str = "light field", *, finite: bool = True) -
         On a wrong number of dimensions or channels, an empty array, a
         non-numeric or complex dtype, NaN or Inf.
     """
+    if hasattr(lf, "detach") and hasattr(lf, "cpu"):  # a torch tensor, one that requires grad or on a GPU too
+        lf = lf.detach().cpu().numpy()
     arr = np.asarray(lf)
     if arr.ndim in (2, 3):
         raise ValueError(

@@ -82,7 +82,9 @@ DEFAULT_BLOCK_ELEMENTS = {"cpu": 1 << 22, "cuda": 1 << 24}
 def to_tensor(lf, device=None, dtype=torch.float32) -> torch.Tensor:
     """Numpy ``(V, U, Y, X[, C])`` to a torch ``(V, U, Y, X, C)`` tensor (C = 1 for grayscale)."""
     arr = np.ascontiguousarray(validate_lightfield(lf))
-    if not arr.flags.writeable:  # torch shares a numpy array's memory, and warns when it is read-only
+    if not arr.dtype.isnative or arr.dtype == np.longdouble:  # big-endian (FITS, MATLAB, HDF5 data), float128:
+        arr = arr.astype(arr.dtype.newbyteorder("=") if arr.dtype != np.longdouble else np.float64)  # not torch's
+    elif not arr.flags.writeable:  # torch shares a numpy array's memory, and warns when it is read-only
         arr = arr.copy()
     t = torch.as_tensor(arr, dtype=dtype, device=select_device(device))
     return t.unsqueeze(-1) if arr.ndim == 4 else t
@@ -297,7 +299,10 @@ class BlurOperator:
         block_elements: int | None = None,
         frame=None,
     ):
-        shape = tuple(int(s) for s in shape)
+        try:
+            shape = tuple(operator.index(s) for s in shape)  # no 3.7 taken as 3
+        except TypeError:
+            raise ValueError(f"shape must be (V, U, Y, X[, C]) of whole numbers; got {shape}") from None
         if len(shape) not in (4, 5) or min(shape) < 1:
             raise ValueError(f"shape must be (V, U, Y, X[, C]) of positive sizes; got {shape}")
         self.shape = shape[:4] + ((shape[4],) if len(shape) == 5 else (1,))

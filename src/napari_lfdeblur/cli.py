@@ -131,6 +131,8 @@ def _path_argument(text: str):
         raise CLIError(f"--path {text!r}: expected PRESET[:EXTENT[:SEED]] or shake6:EXTENT:SEED:ROTATION") from None
     if not 0 <= seed <= MAX_SEED:
         raise CLIError(f"--path {text!r}: the SEED must be a whole number from 0 to 2**63 - 1")
+    if len(rest) > 1 and name in ("linear", "arc"):
+        raise CLIError(f"--path {text!r}: {name} is not random and takes no SEED: {name}[:EXTENT]")
     return preset_path(name, extent=extent, seed=seed, rotation=rotation), {}
 
 
@@ -143,7 +145,9 @@ def _add_simulate(sub):
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
     p.add_argument("--path", required=True,
                    help="camera path: a JSON file of control points ((n, 3), or (n, 6) with a rotation), or "
-                   "PRESET[:EXTENT[:SEED]] with PRESET one of linear, arc, shake, shake6, random; EXTENT in views. "
+                   "PRESET[:EXTENT[:SEED]] with PRESET one of linear, arc, shake, shake6, random; EXTENT in views "
+                   "(the length of linear and arc; the side of the box that shake and random draw their control "
+                   "points from, whose motion is shorter); SEED for shake, shake6 and random. "
                    "shake6 is shake plus a random camera rotation (handheld shake), written "
                    "shake6[:EXTENT[:SEED[:ROTATION]]] with ROTATION the largest rotation in radians (default 0.005, "
                    "at most 0.2)")
@@ -160,7 +164,8 @@ def _run_simulate(args):
     from .io._write import sidecar_path_json, write_lightfield
 
     out = Path(args.output)
-    _check_targets([out, sidecar_path_json(out)], args.overwrite, [args.input])
+    path_file = [args.path] if Path(args.path).is_file() else []  # a --path file is an input too
+    _check_targets([out, sidecar_path_json(out)], args.overwrite, [args.input, *path_file])
     cp, stated = _path_argument(args.path)
     n_times = stated_value(args.n_times, "n_times", [(args.path, stated)], DEFAULT_N_TIMES)
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", [(args.path, stated)], 0.0)

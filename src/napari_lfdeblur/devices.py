@@ -50,6 +50,8 @@ def select_device(device: str | torch.device | None = "auto") -> torch.device:
             "device 'cuda' was asked for, but no CUDA GPU is available to torch; "
             "use device='auto' or 'cpu'"
         )
+    if dev.type == "cpu" and dev.index not in (None, 0):  # torch has one CPU device; 'cpu:1' fails later
+        raise ValueError(f"device {str(dev)!r}: the CPU is 'cpu' (it has no index)")
     if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
         raise ValueError(f"device {str(dev)!r} was asked for, but torch sees {torch.cuda.device_count()} CUDA GPU(s), "
                          f"numbered from 0")

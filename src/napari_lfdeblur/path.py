@@ -219,17 +219,20 @@ PRESETS = {
 def preset_path(name: str, extent: float = 2.0, seed: int = 0, rotation: float | None = None) -> np.ndarray:
     """A named preset path (``linear``, ``arc``, ``shake``, ``shake6`` or ``random``).
 
-    ``extent`` is the motion's size in views. ``shake6`` is ``shake`` with
+    ``extent`` (views) is the length of ``linear`` and ``arc``, the side of
+    the box that ``shake``, ``shake6`` and ``random`` draw their control
+    points from by ``seed`` (they move less). ``shake6`` is ``shake`` with
     a camera rotation of at most ``rotation`` radians (default 0.005), an
-    ``(n, 6)`` path; the other presets are ``(n, 3)`` and take no rotation.
+    ``(n, 6)`` path; the others are ``(n, 3)`` and take no rotation.
 
     Raises
     ------
-    ValueError
-        For an unknown name, a negative or non-finite ``extent``, or a
-        ``rotation`` given to a preset other than ``shake6``.
+    ValueError, TypeError
+        For an unknown name, a negative or non-finite ``extent``, a ``seed``
+        that is not a whole number from 0 to 2**63 - 1, or a ``rotation``
+        given to a preset other than ``shake6``.
     """
-    extent = _number("the path's extent", extent, 0.0)
+    extent, seed = _number("the path's extent", extent, 0.0), check_seed(seed, "the path's seed")
     if rotation is not None and name != "shake6":
         raise ValueError(f"path preset {name!r} has no rotation; use shake6 for a path with rotation")
     if name == "linear":
@@ -331,8 +334,10 @@ def read_path_json(path) -> tuple[np.ndarray, dict]:
     FileNotFoundError
         If the file does not exist.
     ValueError
-        On invalid JSON, no ``control_points`` entry or malformed control
-        points (the message names the file).
+        On invalid JSON, no ``control_points`` entry, control points that
+        are not an array of numbers as :func:`validate_control_points` takes
+        them (the message names the file). The other fields are returned as
+        stated.
     """
     path = Path(path)
     if not path.is_file():
@@ -341,13 +346,9 @@ def read_path_json(path) -> tuple[np.ndarray, dict]:
         doc = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path} is not valid JSON: {exc}") from None
-    cp = doc.get("control_points") if isinstance(doc, dict) else doc
-    if cp is None:
-        raise ValueError(f"{path} has no 'control_points' entry")
-    try:
-        return validate_control_points(cp), doc if isinstance(doc, dict) else {}
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
+    from .io._write import path_from_document
+
+    return path_from_document(doc, path)
 
 
 def path_in_frame(cp, window, frame_shape) -> np.ndarray:

@@ -447,9 +447,18 @@ def inplane_psf(control_points, disparity: float, *, n_times: int = 32, size: in
     (bilinear splats for fractional positions), averaged over the instants.
     Views are assumed inside the aperture (no boundary clamping).
 
+    ``size`` (None: the smallest odd size that holds every tap) must hold
+    every tap too.
+
     Returns
     -------
-    ndarray, float64, shape (size, size), centred, sums to 1
+    ndarray, float64, shape (size, size), centred (at ``size // 2``), sums to 1
+
+    Raises
+    ------
+    ValueError
+        For a path that is not in-plane, or a ``size`` that is not a whole
+        number or cuts taps off.
     """
     cp = validate_control_points(control_points)
     if np.any(cp[:, 2] != 0) or has_rotation(cp):
@@ -467,6 +476,8 @@ def inplane_psf(control_points, disparity: float, *, n_times: int = 32, size: in
     reach = max(max(abs(t[0]), abs(t[1])) for t in taps)
     if size is None:
         size = 2 * int(math.ceil(reach)) + 3
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
+        raise ValueError(f"size must be a whole number >= 1 or None; got {size!r}")
     half = size // 2
     K = np.zeros((size, size))
     for sy, sx, w in taps:
@@ -477,4 +488,7 @@ def inplane_psf(control_points, disparity: float, *, n_times: int = 32, size: in
             for dx, wx in ((0, 1 - ax), (1, ax)):
                 if 0 <= y0 + dy < size and 0 <= x0 + dx < size:
                     K[y0 + dy, x0 + dx] += w * wy * wx
-    return K / K.sum()
+    if not K.sum() > 1 - 1e-9:
+        raise ValueError(f"size {size} cuts off the PSF, whose taps reach {reach:.3g} px from the centre: give "
+                         f"size >= {2 * int(math.ceil(reach)) + 3}, or None")
+    return K

@@ -17,6 +17,7 @@ import os
 from pathlib import Path
 
 from ..io import probe_layout, read_lightfield_with_metadata
+from ..io._write import check_path_field
 from .layers import lightfield_layer_data, path_layer_data
 
 __all__ = ["napari_get_reader", "read_lightfield_layer"]
@@ -90,7 +91,8 @@ def read_lightfield_layer(path, **options):
     layers = [lightfield_layer_data(lf, name=name, metadata=meta)]
     if meta.get("control_points") is not None:
         try:
-            n_times = int(meta.get("n_times") or 32)
+            stated = meta.get("n_times")
+            n_times = 32 if stated is None else check_path_field("n_times", stated, p.name)
             layers.append(path_layer_data(meta["control_points"], lf.shape, n_times=n_times, name=f"{name} path",
                                           infinity_disparity=meta.get("infinity_disparity"),
                                           metadata={"source_layer": name,  # the views the file says it is for

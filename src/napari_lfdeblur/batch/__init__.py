@@ -106,7 +106,9 @@ def simulate_dataset(inputs, out_dir, *, n_per_input: int = 1, path_kind: str = 
     path_kind : {'linear', 'arc', 'shake', 'shake6', 'random'}, default 'random'
         See :func:`draw_path`.
     extent : float or (float, float), default 2.0
-        Motion size in views, or a range it is drawn from uniformly.
+        In views, or a range it is drawn from uniformly: the length of
+        ``linear`` and ``arc``, the side of the box of the random control
+        points of the others (their motion is shorter).
     infinity_disparity : float, default 0.0
         ``d_inf`` of the blur model, px/view.
     noise : float, default 0.0

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._lightfield import white_level
+
 __all__ = ["PATH_KINDS", "item_seed", "draw_path", "simulate_item", "run_item", "item_metadata"]
 
 PATH_KINDS = ("linear", "arc", "shake", "shake6", "random")
@@ -78,7 +80,9 @@ def draw_path(path_kind: str, extent, rng: np.random.Generator) -> np.ndarray:
         with a handheld camera rotation (up to 0.005 rad), as
         :func:`~napari_lfdeblur.path.shake6_path`.
     extent : float or (float, float)
-        The motion's size in views, or a range to draw it from uniformly.
+        In views, or a range to draw it from uniformly: the length of
+        ``linear`` and ``arc``, the side of the box of the random control
+        points of the others (their motion is shorter).
     rng : numpy.random.Generator
 
     Returns
@@ -112,7 +116,10 @@ def simulate_item(lf, name: str, index: int, *, path_kind: str = "random", exten
     ``numpy.random.default_rng(item_seed(seed, name, index))``; the light
     field is blurred by :func:`~napari_lfdeblur.blur.simulate_blur`, then
     Gaussian noise of standard deviation ``noise`` is added and the result
-    clipped to [0, 1] (no clipping when ``noise`` is 0).
+    clipped to [0, 1] (no clipping when ``noise`` is 0). Both are on the
+    light field's own scale: for an integer array (kept on its scale, as
+    :func:`~napari_lfdeblur.blur.simulate_blur` keeps it), ``noise`` and the
+    clipping range are multiplied by the dtype's largest value.
 
     Parameters
     ----------
@@ -134,7 +141,8 @@ def simulate_item(lf, name: str, index: int, *, path_kind: str = "random", exten
     cp = draw_path(path_kind, extent, rng)
     blurred = simulate_blur(lf, cp, n_times=n_times, infinity_disparity=infinity_disparity, device=device)
     if noise > 0:
-        blurred = np.clip(blurred + rng.normal(0.0, noise, blurred.shape).astype(np.float32), 0.0, 1.0)
+        white = white_level(lf.dtype) if isinstance(lf, np.ndarray) else 1.0  # uint8: noise 0.01 is 2.55
+        blurred = np.clip(blurred + rng.normal(0.0, noise * white, blurred.shape).astype(np.float32), 0.0, white)
     return blurred, cp
 
 

@@ -311,8 +311,8 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     That is ``<name>.path.json`` (``path.json`` in a folder), for the formats
     that hold no path themselves. Its ``control_points`` (and the
     ``n_times`` and ``infinity_disparity`` it states) go to the top level,
-    its name to ``path_file``. A file there that holds no valid path is
-    ignored with a warning: the light field is read all the same. One that
+    its name to ``path_file``. A file there that holds no valid path
+    (:func:`~napari_lfdeblur.path.read_path_json`) is ignored with a warning: the light field is read all the same. One that
     names (``lightfield``) another light field of the same name that is
     there too (``a.npz``'s beside ``a.npy``: both would read ``a.path.json``)
     is that one's and is left alone. A path
@@ -322,8 +322,7 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     """
     import json
 
-    from ..path import validate_control_points
-    from ._write import view_shape_note
+    from ._write import path_from_document, view_shape_note
 
     beside = path_json_beside(path)
     if not beside.is_file():
@@ -332,7 +331,7 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
         return  # the path of a.npz, beside a.npy
     try:
         doc = json.loads(beside.read_text())
-        cp = validate_control_points(doc.get("control_points") if isinstance(doc, dict) else doc)
+        cp, _ = path_from_document(doc, None)
     except (OSError, ValueError, TypeError) as exc:
         warnings.warn(f"{beside} was not read as the light field's camera path: {exc}", stacklevel=3)
         return

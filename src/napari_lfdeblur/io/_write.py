@@ -254,6 +254,45 @@ def check_path_field(key: str, value, source: str):
     return int(value) if key == "n_times" else float(value)
 
 
+def path_from_document(doc, source) -> tuple[np.ndarray, dict]:
+    """The control points and the stated path fields of a path file's parsed JSON ``doc``.
+
+    ``doc`` is an object with ``control_points`` (and optionally the
+    :data:`PATH_FIELDS`) or a bare list of rows. The control points must be
+    JSON numbers (not strings or booleans), as
+    :func:`~napari_lfdeblur.path.validate_control_points` takes them. The
+    other fields are checked where they are used (:func:`check_path_field`),
+    where an option may override them.
+
+    Returns
+    -------
+    control_points : ndarray, float64, shape (n, 3) or (n, 6)
+    fields : dict
+        The object itself, or ``{}`` for a bare list.
+
+    Raises
+    ------
+    ValueError
+        On malformed control points; the message names ``source`` (None:
+        the caller names it).
+    """
+    from ..path import validate_control_points
+
+    prefix = f"{source}: " if source else ""
+    cp = doc.get("control_points") if isinstance(doc, dict) else doc
+    if cp is None:
+        raise ValueError(f"{source or 'the file'} has no 'control_points' entry")
+    odd = [v for row in (cp if isinstance(cp, list) else []) if isinstance(row, list) for v in row
+           if isinstance(v, bool) or not isinstance(v, (int, float))]
+    if odd:
+        raise ValueError(f"{prefix}control points must be numbers; got {odd[0]!r}")
+    try:
+        cp = validate_control_points(cp)
+    except ValueError as exc:
+        raise ValueError(f"{prefix}{exc}") from None
+    return cp, doc if isinstance(doc, dict) else {}
+
+
 def view_shape_note(control_points, shape, fields: dict, source) -> str | None:
     """What to tell someone who applies the path ``control_points`` from ``source`` (whose ``fields`` may state
     its ``view_shape``) to a light field of ``shape``, or None.

@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox, Table
@@ -79,8 +80,8 @@ def notify_warning(message: str) -> None:
 def set_stated(field, value, source: str) -> bool:
     """Set a numeric form field to a value a layer or a file states.
 
-    A value the field cannot take (not a number, not whole for an integer
-    field, outside the field's range) is left out with a warning
+    A value the field cannot take (not a number, not an integer for an
+    integer field, outside the field's range) is left out with a warning
     notification naming ``source``; the field keeps its value.
 
     Returns
@@ -88,13 +89,10 @@ def set_stated(field, value, source: str) -> bool:
     bool
         Whether the field took the value.
     """
-    try:
-        number = float(value)
-        usable = not isinstance(value, bool) and field.min <= number <= field.max
-        if isinstance(field, SpinBox):
-            usable = usable and number == int(number)
-    except (TypeError, ValueError):
-        usable = False
+    whole = isinstance(value, (int, np.integer)) and not isinstance(value, bool)  # as lfdeblur reads it: no 8.0
+    usable = whole if isinstance(field, SpinBox) else whole or isinstance(value, (float, np.floating))
+    number = float(value) if usable else math.nan
+    usable = usable and field.min <= number <= field.max
     if usable:
         field.value = int(number) if isinstance(field, SpinBox) else number
         if abs(field.value - number) > 1e-12 * max(1.0, abs(number)):  # the field's decimals rounded it
@@ -239,6 +237,11 @@ ROTATION_COLUMNS = ("r_x (rad)", "r_y (rad)", "r_z (rad)")
 _NAMES = ("p_x", "p_y", "p_z", "r_x", "r_y", "r_z")
 
 
+def _shown(value: float) -> float:
+    """A number as a table cell shows it: to 6 significant digits, with no '-0' or '1e-17'."""
+    return 0.0 if abs(value) < 1e-9 else float(f"{value:.6g}")
+
+
 class PathTable(Container):
     """An editable table of Bezier control points, one per row.
 
@@ -262,7 +265,7 @@ class PathTable(Container):
             "add the camera rotation r_x (pitch), r_y (yaw), r_z (roll) in radians, each at most "
             f"{MAX_ROTATION} rad; handheld shake is a few mrad (0.005 rad moves the image by about "
             "0.005 max(Y, X) / 2 px)"))
-        self._hidden_rotation = None
+        self._hidden_rotation, self._exact = None, {}
         self._syncing = False
         self.add_button.changed.connect(self._add_row)
         self.remove_button.changed.connect(self._remove_row)
@@ -280,7 +283,12 @@ class PathTable(Container):
         return 6 if self.rotation.value else 3
 
     def _set_rows(self, rows) -> None:
-        rows = [list(r) for r in rows]
+        """Show ``rows`` (numbers rounded by :func:`_shown`; each kept exactly while its cell shows it)."""
+        def number(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+        self._exact = {(i, j): float(v) for i, r in enumerate(rows) for j, v in enumerate(r) if number(v)}
+        rows = [[_shown(v) if number(v) else v for v in r] for r in rows]
         columns = COLUMNS + ROTATION_COLUMNS if self.rotation.value else COLUMNS
         # rows are numbered from 1, like the points in error messages
         self.table.value = {"data": rows, "index": list(range(1, len(rows) + 1)), "columns": list(columns)}
@@ -293,7 +301,8 @@ class PathTable(Container):
         self.changed.emit(self)
 
     def set_control_points(self, control_points, view_shape=None) -> None:
-        """Fill the table with an ``(n, 3)`` or ``(n, 6)`` array (shown to 6 significant digits).
+        """Fill the table with an ``(n, 3)`` or ``(n, 6)`` array (shown to 6 significant digits, used exactly
+        until a cell is edited).
 
         The *rotation* box follows the array's width. ``view_shape``: the
         ``(Y, X)`` of the views the path belongs to, when known.
@@ -306,11 +315,21 @@ class PathTable(Container):
         finally:
             self._syncing = False
         self._hidden_rotation = None
-        # no '-0' or '1e-17' in the table
-        self._set_rows([[0.0 if abs(v) < 1e-9 else float(f"{v:.6g}") for v in row] for row in cp])
+        self._set_rows(cp.tolist())
+
+    def _cells(self) -> list:
+        """The table's rows: each cell that still shows the number it was set to as that exact number, the
+        others as they were typed."""
+        return [[self._exact[i, j] if isinstance(cell, float) and (i, j) in self._exact
+                 and cell == _shown(self._exact[i, j]) else cell for j, cell in enumerate(cells)]
+                for i, cells in enumerate(self.table.data.to_list())]
 
     def control_points(self) -> np.ndarray:
         """The table as a float64 ``(n, 3)`` array, or ``(n, 6)`` when *rotation* is ticked.
+
+        A cell that still shows the number it was set to (by
+        :meth:`set_control_points`, a row added or the rotation shown again)
+        gives that number exactly, not the 6 digits shown.
 
         Raises
         ------
@@ -319,7 +338,7 @@ class PathTable(Container):
             ``MAX_ROTATION``, or fewer than 2 rows.
         """
         rows = []
-        for i, cells in enumerate(self.table.data.to_list()):
+        for i, cells in enumerate(self._cells()):
             row = []
             for j, cell in enumerate(cells):
                 try:
@@ -338,7 +357,7 @@ class PathTable(Container):
         """Show (restoring hidden values, else zeros) or hide the rotation columns."""
         if self._syncing:
             return
-        rows = [list(r) for r in self.table.data.to_list()]
+        rows = self._cells()
         if self.rotation.value:
             hidden = self._hidden_rotation
             if hidden is None or len(hidden) != len(rows):
@@ -350,11 +369,11 @@ class PathTable(Container):
         self._set_rows(rows)
 
     def _add_row(self, *_):
-        rows = self.table.data.to_list()
+        rows = self._cells()
         self._set_rows(rows + [list(rows[-1]) if rows else [0.0] * self.n_columns])
 
     def _remove_row(self, *_):
-        rows = self.table.data.to_list()
+        rows = self._cells()
         if len(rows) > 2:
             self._set_rows(rows[:-1])
 
@@ -377,9 +396,14 @@ class PathSource(Container):
         self.take_button = PushButton(name="take", text="Take path")
         self.json_file = FileEdit(name="json_file", label="path JSON", mode="r", filter="*.json",
                                   tooltip="a camera path saved by save_path_json / the writers")
+        self.load_button = PushButton(name="load", text="Load path file", tooltip=(
+            "read the chosen path JSON again: choosing a file reads it, but choosing the same file again "
+            "(after it changed, or after the table was edited) does not"))
         self.take_button.changed.connect(self.take_path)
         self.json_file.changed.connect(self.load_json)
-        super().__init__(name="path_source", widgets=[self.path_layer, self.take_button, self.json_file])
+        self.load_button.changed.connect(self.reload_json)
+        super().__init__(name="path_source",
+                         widgets=[self.path_layer, self.take_button, self.json_file, self.load_button])
         self.margins = (0, 0, 0, 0)
 
     def take_from(self, layer, quiet: bool = False) -> bool:
@@ -400,6 +424,14 @@ class PathSource(Container):
     def take_path(self, *_):
         """Hand on the path of the layer chosen in *take path from*."""
         self.take_from(self.path_layer.value)
+
+    def reload_json(self, *_):
+        """*Load path file*: hand on the path of the chosen JSON file again (a notification when none is)."""
+        name = self.json_file.value
+        if not name or not str(name).lower().endswith(".json"):
+            notify_error(f"{self._title}: choose a path JSON file (.json) first")
+            return
+        self.load_json()
 
     def load_json(self, *_):
         """Hand on the path of the chosen JSON file."""

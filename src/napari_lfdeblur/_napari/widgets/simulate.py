@@ -39,7 +39,9 @@ def _path_form() -> Container:
         ComboBox(name="preset", choices=["linear", "arc", "shake", "shake6"], value="linear",
                  tooltip="linear, arc, shake (a random wiggle) or shake6 (a shake with camera rotation, "
                  "as a handheld camera: a 6-column path)"),
-        fspin("extent", 2.0, 0.0, 50.0, 0.25, tooltip="size of the motion, in views"),
+        fspin("extent", 2.0, 0.0, 50.0, 0.25, tooltip=(
+            "in views: the length of linear and arc; the side of the box that shake, shake6 and random draw "
+            "their control points from (they move less)")),
         fspin("rotation", 0.005, 0.0, MAX_ROTATION, 0.0005, label="rotation (rad)",
               tooltip="largest camera rotation of the shake6 preset, radians (handheld: a few thousandths; "
               "0.005 rad moves the image by about 0.005 max(Y, X) / 2 px)"),
