@@ -67,16 +67,39 @@ def test_psnr_and_ssim_reject_bad_input():
 # ------------------------------------------------------------------ SSIM
 
 
+def _ssim_brute(est, ref, data_range):
+    """Mean SSIM of 2D images ``(..., Y, X)`` over every 7 x 7 window inside the frame, averaged over images.
+
+    Wang et al. 2004, eq. 13, with skimage.metrics.structural_similarity's defaults as its docs give them:
+    K1 = 0.01, K2 = 0.03, a 7 x 7 uniform window, sample (N - 1) covariances, and the mean taken where the
+    window lies inside the image.
+    """
+    c1 = (0.01 * data_range) ** 2
+    c2 = (0.03 * data_range) ** 2
+    values = []
+    for e, r in zip(np.reshape(est, (-1,) + np.shape(est)[-2:]), np.reshape(ref, (-1,) + np.shape(ref)[-2:])):
+        we = np.lib.stride_tricks.sliding_window_view(e.astype(np.float64), (7, 7)).reshape(-1, 49)
+        wr = np.lib.stride_tricks.sliding_window_view(r.astype(np.float64), (7, 7)).reshape(-1, 49)
+        me, mr = we.mean(axis=1), wr.mean(axis=1)
+        ve, vr = we.var(axis=1, ddof=1), wr.var(axis=1, ddof=1)
+        cov = ((we - me[:, None]) * (wr - mr[:, None])).sum(axis=1) / 48
+        s = (2 * me * mr + c1) * (2 * cov + c2) / ((me**2 + mr**2 + c1) * (ve + vr + c2))
+        values.append(s.mean())
+    return float(np.mean(values))
+
+
 def test_ssim_is_one_for_equal_and_the_mean_over_views():
     rng = np.random.default_rng(1)
     ref = rng.random((2, 2, 16, 16)).astype(np.float32)
     assert ssim(ref, ref) == pytest.approx(1.0)
-    # one view in four replaced by a constant image: SSIM of that view is
-    # c1 / (var + c1) for an estimate with zero variance and the same mean ...
+    # one view in four replaced by a constant image of the same mean: SSIM of that view is small, its
+    # contrast-structure term being c2 / (var + c2) in each window for an estimate with zero variance ...
     est = ref.copy()
     est[1, 1] = ref[1, 1].mean()
     s_view = ssim(est[1, 1], ref[1, 1])
     assert 0 <= s_view < 0.1
+    # its value is SSIM's formula over 7 x 7 windows, computed here
+    assert s_view == pytest.approx(_ssim_brute(est[1, 1], ref[1, 1], 1.0), abs=1e-5)
     # ... and the light field's SSIM is the mean of the four views' values
     assert ssim(est, ref) == pytest.approx((3 + s_view) / 4, abs=1e-9)
 
@@ -88,10 +111,15 @@ def test_ssim_colour_averages_channels_and_falls_with_noise():
     est[..., 2] = 1 - ref[..., 2]  # one channel inverted
     s_inv = ssim(est[..., 2], ref[..., 2])
     assert s_inv < 0
+    # a colour light field is scored per view and channel over 7 x 7 windows (channels last)
+    assert s_inv == pytest.approx(_ssim_brute(est[..., 2], ref[..., 2], 1.0), abs=1e-9)
     assert ssim(est, ref) == pytest.approx((2 + s_inv) / 3, abs=1e-9)
-    small = ssim(ref + rng.normal(0, 0.02, ref.shape), ref)
+    noisy = ref + rng.normal(0, 0.02, ref.shape)
+    small = ssim(noisy, ref)
     large = ssim(ref + rng.normal(0, 0.2, ref.shape), ref)
     assert 1 > small > large
+    channels_first = np.moveaxis(noisy, -1, 0), np.moveaxis(ref, -1, 0)
+    assert small == pytest.approx(_ssim_brute(*channels_first, 1.0), abs=1e-9)
 
 
 # ---------------------------------------------------------- angular error
@@ -197,6 +225,7 @@ def test_integer_inputs_are_scored_on_their_dtypes_range():
     assert psnr(est, ref) == pytest.approx(10 * np.log10(255.0**2 / mse))  # not on [0, 1] (about -22 dB)
     assert psnr(est, ref) == pytest.approx(psnr(est / 255.0, ref / 255.0))
     assert ssim(est, ref) == pytest.approx(ssim(est / 255.0, ref / 255.0))
+    assert ssim(est, ref) == pytest.approx(_ssim_brute(est, ref, 255.0), abs=1e-9)
     wide = ref.astype(np.uint16)
     assert psnr(wide, wide + 1) == pytest.approx(10 * np.log10(65535.0**2))
 

@@ -1,5 +1,7 @@
 """4D finite differences, divergence (exact negative adjoint), TV and its dual projection."""
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -149,15 +151,30 @@ def test_dual_projection_and_soft_threshold():
     torch.testing.assert_close(prox_l1(x, 0.5), torch.tensor([-1.5, 0.0, 0.0, 0.0, 2.5]))
 
 
-def test_gradient_norm_bound_holds():
-    # power iteration on -div(grad) estimates ||grad||^2
-    x = torch.from_numpy(np.random.default_rng(5).standard_normal((4, 4, 6, 6)))
+def _exact_gradient_norm_sq(shape, weights):
+    # The forward difference with a zero last row on n samples has ||D||^2 = 4 sin^2(pi (n - 1) / (2 n)) (its
+    # D^T D is the Neumann Laplacian, eigenvalues 4 sin^2(pi k / (2 n)), k < n). The weighted 4D gradient stacks
+    # commuting Kronecker factors, so ||grad_w||^2 = sum_a w_a^2 ||D_{n_a}||^2.
+    return sum(w * w * 4.0 * math.sin(math.pi * (n - 1) / (2 * n)) ** 2 for w, n in zip(weights, shape))
+
+
+@pytest.mark.parametrize("weights", [None, (1, 1, 2, 2), (0.5, 1, 2, 3)])
+def test_gradient_norm_bound_holds(weights):
+    w = (1.0, 1.0, 1.0, 1.0) if weights is None else weights
+    shape = (4, 4, 6, 6)
+    # power iteration on -div_w(grad_w) estimates ||grad_w||^2 from below and reaches the analytic value
+    x = torch.from_numpy(np.random.default_rng(5).standard_normal(shape))
     for _ in range(200):
-        x = -divergence4d(gradient4d(x))
+        x = -divergence4d(gradient4d(x, weights), weights)
         x = x / torch.linalg.vector_norm(x)
-    est = float((x * -divergence4d(gradient4d(x))).sum())
-    assert est <= gradient_norm_bound() + 1e-9
-    assert est > 0.5 * gradient_norm_bound()
+    est = float((x * -divergence4d(gradient4d(x, weights), weights)).sum())
+    exact = _exact_gradient_norm_sq(shape, w)
+    assert 0.99 * exact <= est <= exact * (1 + 1e-9)
+    bound = gradient_norm_bound(weights)
+    assert exact <= bound + 1e-9
+    assert est > 0.5 * bound
+    # the bound holds for every field size, including a large one whose exact norm nears 4 sum_a w_a^2
+    assert _exact_gradient_norm_sq((64, 64, 256, 256), w) <= bound + 1e-9
 
 
 def test_bad_input():
@@ -221,3 +238,12 @@ def test_laplacian_is_minus_the_divergence_of_the_gradient(weights):
     np.testing.assert_allclose(out.numpy(), ref.numpy(), atol=1e-12)
     # positive semi-definite: <L, lap L> = ||grad L||^2
     np.testing.assert_allclose(float((L * ref).sum()), sum(float((g * g).sum()) for g in gradient4d(L, weights)))
+
+
+@pytest.mark.parametrize("weights", [(1, 1, 1, float("nan")), (1, 1, float("inf"), 1), (1, 1, -1, 1), (1, 1, 1)])
+def test_axis_weights_are_four_finite_non_negative_numbers(weights):
+    """A NaN weight would make every TV value and prox NaN; an infinite one, every difference along its axis."""
+    from napari_lfdeblur.priors import tv4d
+
+    with pytest.raises(ValueError, match="axis_weights must be 4 non-negative numbers"):
+        tv4d(torch.zeros(2, 2, 3, 3, 1), axis_weights=weights)

@@ -91,6 +91,11 @@ def test_bad_arguments():
         procedural_scene((3, 3, 16, 16), seed=0, infinity_disparity=1e6)
     with pytest.raises(ValueError, match="shape"):
         procedural_scene((3, 3, 16.5, 16), seed=0)
+    from napari_lfdeblur.samples import synthetic_scene
+
+    for make in (procedural_scene, synthetic_scene):  # a string is not a colour flag ('no' would be true)
+        with pytest.raises(TypeError, match="color must be True or False; got 'no'"):
+            make((3, 3, 16, 16), seed=0, color="no")
     a, _ = procedural_scene(np.array([3, 3, 8, 8]), seed=0)  # a numpy shape, as a tuple would be
     np.testing.assert_array_equal(a, procedural_scene((3, 3, 8, 8), seed=0)[0])
 

@@ -111,7 +111,37 @@ def test_translation_matches_ray_tracer(scene, sharp, name):
     error = _operator_error(sharp, truth, cp)
     assert error < tolerance, f"{name}: {error:.3f}"
     assert _operator_error(sharp, truth, cp, np.zeros_like(cp)) > 0.5
-    assert _operator_error(sharp, truth, cp, -cp) > 3 * tolerance  # the signs of p_x, p_y, p_z
+    assert _operator_error(sharp, truth, cp, -cp) > 3 * tolerance  # the sign of the path
+
+
+@pytest.fixture(scope="module")
+def smooth_scene():
+    """Background at -0.25 px/view and a soft-edged square at -0.5, textures of 24-48 px.
+
+    Textures this smooth keep the bilinear floor below the p_z term, which moves pixels by only
+    ``x~ p_z`` views: on ``scene`` the floor swamps it.
+    """
+    return make_scene(RADIUS, disparities=(-0.25, -0.5), wavelengths_px=(24.0, 48.0))
+
+
+# measured errors of the path along the optical axis: 0.212; p_z dropped 1.0, negated 1.94, scaled
+# by 0.75 0.283, by 1.25 0.39.
+DEPTH_PATH = [[0.0, 0.0, 0.0], [0.0, 0.0, 1.8], [0.0, 0.0, -1.0]]
+
+
+def test_depth_translation_matches_ray_tracer(smooth_scene):
+    """A path along p_z alone: the operator's magnification of the views' shifts, ``-x~ p_z`` and ``-y~ p_z``."""
+    sharp = render(smooth_scene, SHAPE)
+    cp = np.array(DEPTH_PATH)
+    truth = render_blur(smooth_scene, SHAPE, cp, N_TIMES)
+    error = _operator_error(sharp, truth, cp)
+    assert error < 0.3, f"{error:.3f}"
+    # an operator without p_z, or with its sign flipped, is far off
+    assert _operator_error(sharp, truth, cp, cp * [1.0, 1.0, 0.0]) > 3 * error
+    assert _operator_error(sharp, truth, cp, -cp) > 3 * error
+    # and p_z scaled by 25 % either way is farther from the truth than the model's own scale
+    for scale in (0.75, 1.25):
+        assert _operator_error(sharp, truth, cp, cp * [1.0, 1.0, scale]) > 1.15 * error, scale
 
 
 # --------------------------------------------------------------------------- rotation

@@ -15,6 +15,7 @@ Laplacian.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import torch
@@ -51,8 +52,8 @@ def _weights(axis_weights) -> tuple[float, float, float, float]:
     if axis_weights is None:
         return (1.0, 1.0, 1.0, 1.0)
     w = tuple(float(a) for a in axis_weights)
-    if len(w) != 4 or any(a < 0 for a in w):
-        raise ValueError(f"axis_weights must be 4 non-negative numbers (v, u, y, x); got {axis_weights!r}")
+    if len(w) != 4 or not all(0 <= a < math.inf for a in w):  # NaN fails too
+        raise ValueError(f"axis_weights must be 4 non-negative numbers (v, u, y, x), finite; got {axis_weights!r}")
     return w
 
 

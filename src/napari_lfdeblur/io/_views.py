@@ -47,13 +47,17 @@ def _image_files(folder: Path) -> list[str]:
 def probe_scheme(folder) -> str | None:
     """The naming scheme of a folder of views, or None if it holds no light field.
 
-    Cheap: looks at file names only.
+    Cheap: looks at file names only. One view is a light field only where
+    :func:`~napari_lfdeblur.io.write_lightfield` wrote it (beside its
+    ``lightfield.json``).
     """
     folder = Path(folder)
     try:
         names = _image_files(folder)
     except OSError:
         return None
+    if len(names) == 1 and _RC.match(names[0]) and (folder / "lightfield.json").is_file():
+        return "rc"  # a single view that write_lightfield wrote: a 1 x 1 light field
     if len(names) < 2:
         return None
     counts = {

@@ -193,7 +193,7 @@ def procedural_scene(
         ``infinity_disparity`` that is not finite or beyond the bound of
         :func:`~napari_lfdeblur.simulate_blur` (``|d_inf| (max(V, U) - 1) / 2 <= min(Y, X) / 2``).
     TypeError
-        When ``seed`` is not an int.
+        When ``seed`` is not an int, or ``color`` not a bool.
 
     See Also
     --------
@@ -208,6 +208,8 @@ def procedural_scene(
     True
     """
     V, U, Y, X = _check(shape, seed, infinity_disparity, n_layers)
+    if not isinstance(color, (bool, np.bool_)):  # 'no' would be true
+        raise TypeError(f"color must be True or False; got {color!r}")
     d_inf = float(infinity_disparity)
     rng = np.random.default_rng([seed, 0x1F5CE])
     n = int(rng.integers(3, 7)) if n_layers is None else int(n_layers)

@@ -109,7 +109,7 @@ def synthetic_scene(
         On a malformed shape, ``n_layers < 1``, a seed outside ``0 .. 2**63 - 1``, or a
         ``disparity_range`` that is not two finite numbers, farthest first, within the bound.
     TypeError
-        When ``n_layers`` or ``seed`` is not an integer, or a disparity not a number.
+        When ``n_layers`` or ``seed`` is not an integer, a disparity not a number, or ``color`` not a bool.
 
     Examples
     --------
@@ -120,6 +120,8 @@ def synthetic_scene(
     V, U, Y, X = check_view_grid(shape)
     n_layers = check_int(n_layers, "n_layers", 1)
     rng = np.random.default_rng(None if seed is None else check_seed(seed))
+    if not isinstance(color, (bool, np.bool_)):  # 'no' would be true
+        raise TypeError(f"color must be True or False; got {color!r}")
     channels = 3 if color else 1
     d_far, d_near = _check_disparity_range(disparity_range, (V, U, Y, X))
     disparities = np.linspace(d_far, d_near, n_layers) if n_layers > 1 else np.array([d_far])
