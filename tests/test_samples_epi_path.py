@@ -24,7 +24,8 @@ from napari_lfdeblur import (
     views_transposed,
 )
 from napari_lfdeblur.epi import ViewOrderWarning, warn_if_transposed
-from napari_lfdeblur.path import PRESETS, preset_path
+from napari_lfdeblur.deconvolution import estimate_noise_sigma
+from napari_lfdeblur.path import PRESETS, preset_path, shake6_path
 
 from conftest import LYTRO_DIR
 
@@ -379,3 +380,17 @@ def test_a_path_files_control_points_are_json_numbers(tmp_path, doc, words):
     with pytest.raises(ValueError, match="odd.json") as err:
         read_path_json(f)
     assert words in str(err.value)
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda lf: views_transposed(lf, "a"), "min_shift must be a number >= 0"),
+    (lambda lf: views_transposed(lf, float("nan")), "min_shift must be a number >= 0"),
+    (lambda lf: shake6_path(rotation=None), "rotation must be a number; got None"),
+    (lambda lf: shake6_path(rotation=-0.1), "rotation must be a finite number >= 0"),
+    (lambda lf: estimate_noise_sigma(np.where(lf > 0.5, np.nan, lf)), "NaN or Inf"),
+    (lambda lf: estimate_noise_sigma(lf[0]), "a light field is 4D"),
+])
+def test_bad_arguments_of_the_helpers_are_clear_errors(call, words):
+    lf = np.random.default_rng(0).random((3, 3, 8, 8))
+    with pytest.raises(ValueError, match=words):
+        call(lf)

@@ -6,6 +6,8 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy import ndimage
 
+from ._lightfield import validate_lightfield
+
 __all__ = ["estimate_noise_sigma"]
 
 #: side of the square patches whose covariance is analysed
@@ -112,7 +114,7 @@ def estimate_noise_sigma(lf: np.ndarray) -> float:
     >>> round(estimate_noise_sigma(noisy), 3)
     0.01
     """
-    a = np.asarray(lf, dtype=np.float32)
+    a = validate_lightfield(lf).astype(np.float32, copy=False)  # 4D or 5D, finite: NaN gives no estimate
     if a.ndim == 4:
         a = a[..., None]
     if min(a.shape[2:4]) < 2:

@@ -220,6 +220,8 @@ def views_transposed(lf, min_shift: float = 0.1) -> bool | None:
         shifted copies of each other (registered, a pair correlates by less
         than :data:`MIN_VIEW_CORRELATION`: noise, unrelated images).
     """
+    if isinstance(min_shift, bool) or not isinstance(min_shift, (int, float, np.number)) or not min_shift >= 0:
+        raise ValueError(f"min_shift must be a number >= 0 (px/view); got {min_shift!r}")
     shifts, agreement = _view_motion(lf, True, "views_transposed")
     return transposed_from_shifts(shifts, min_shift) if agreement >= MIN_VIEW_CORRELATION else None
 

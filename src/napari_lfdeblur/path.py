@@ -194,8 +194,8 @@ def shake6_path(
     ValueError
         If ``rotation`` is negative or beyond ``MAX_ROTATION``.
     """
-    rotation = float(rotation)
-    if not 0.0 <= rotation <= MAX_ROTATION:
+    rotation = _number("rotation", rotation, 0.0)
+    if not rotation <= MAX_ROTATION:
         raise ValueError(f"rotation must be in [0, {MAX_ROTATION}] rad; got {rotation:g}")
     translation = shake_path(extent=extent, seed=seed, n_points=n_points, z=z)
     rng = np.random.default_rng(None if seed is None else [int(seed), 6])
