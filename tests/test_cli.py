@@ -130,13 +130,22 @@ def test_demo_quick(tmp_path):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--quick", "--skip-blind"]) == 0
     summary = json.loads((out / "summary.json").read_text())
+    from napari_lfdeblur import demo
+
+    samples, c = demo._samples(True), summary["psnr_crop"]
     for name in ("synthetic", "lytro"):
         rec = summary["samples"][name]
+        sharp = samples[name][0]
         assert (out / f"{name}.png").stat().st_size > 10_000
-        # the written blurred light field carries the true path
+        # the written blurred light field is the sharp one blurred along the true path, plus noise of the stated std
         blurred = read_lightfield(out / f"{name}_blurred.npz")
-        assert list(blurred.shape) == rec["shape"]
-        # deconvolution with the known path beats the blurred input
+        assert list(blurred.shape) == rec["shape"] == list(sharp.shape)
+        clean = simulate_blur(sharp, np.asarray(summary["true_control_points"]), n_times=summary["render_n_times"])
+        assert abs((blurred - clean).std() / summary["noise_sigma"] - 1) < 0.25, (blurred - clean).std()
+        # the written deconvolved light field is the one whose PSNR the summary gives (10 log10(1 / MSE) over the
+        # views without psnr_crop border pixels), and deconvolution with the known path beats the blurred input
+        error = (read_lightfield(out / f"{name}_deconvolved.npz") - sharp.astype(np.float64))[:, :, c:-c, c:-c]
+        assert abs(10 * np.log10(1 / np.mean(error ** 2)) - rec["psnr_db"]["deconvolved (path known)"]) < 0.01
         assert rec["psnr_db"]["deconvolved (path known)"] > rec["psnr_db"]["blurred"] + 1.0
     np.testing.assert_allclose(load_path_json(out / "synthetic_blurred.path.json"), summary["true_control_points"])
     # every light field it writes has the path beside it, and the summary lists exactly what is there

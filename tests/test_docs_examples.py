@@ -14,8 +14,10 @@ import re
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "headless.md"
@@ -45,13 +47,91 @@ def test_the_doc_has_both_kinds_of_example():
     assert len(_core_blocks()) >= 2 and len(_viewer_blocks()) >= 2
 
 
+def _psnr_by_hand(estimate, reference):
+    return 10 * np.log10(1 / np.mean((np.asarray(estimate, np.float64) - reference) ** 2))
+
+
+def _deconvolution_gains(ns, out, seconds):
+    # "PSNR blurred A -> deconvolved B": the two PSNRs of the block's arrays, and the known path restores
+    (line,) = [line for line in out.splitlines() if line.startswith("PSNR blurred")]
+    match = re.fullmatch(r"PSNR blurred (\S+) -> deconvolved (\S+)", line)
+    before, after = float(match[1]), float(match[2])
+    assert abs(before - _psnr_by_hand(ns["blurred"], ns["lf"])) < 0.01
+    assert abs(after - _psnr_by_hand(ns["sharp"], ns["lf"])) < 0.01
+    assert after > before + 3, line
+
+
+def _progress_lines(ns, out, seconds):
+    # one line a record, "stage iteration percent", the iterations counting up to at most n_iter=10
+    records = [re.fullmatch(r"(\w+) (\d+) (\d+)%", line) for line in out.splitlines()]
+    assert records and all(records), out
+    assert [int(r[2]) for r in records] == list(range(1, len(records) + 1)) and len(records) <= 10, out
+    percents = [int(r[3]) for r in records]
+    assert percents == sorted(percents) and 0 < percents[-1] <= 100, out
+
+
+def _stopped_early(ns, out, seconds):
+    # the event, set after 0.5 s, stops the 100 000-iteration solve: Cancelled is raised and printed
+    match = re.fullmatch(r"stopped after (\d+) iterations\n", out)
+    assert match and int(match[1]) < 100_000, out
+    assert ns["stop"].is_set() and seconds < 60, seconds
+
+
+def _blind_result(ns, out, seconds):
+    # "(n, 3), zero-mean gauge" (docs/model.md, Gauge: the mean of p(t_k) over the T instants is 0), then the
+    # light field's shape, and the parameters as JSON: those the block set
+    from napari_lfdeblur import BlindParams, bezier_positions
+
+    result = ns["result"]
+    assert result.control_points.ndim == 2 and result.control_points.shape[1] == 3
+    mean = bezier_positions(result.control_points, result.params.n_times).mean(axis=0)
+    np.testing.assert_allclose(mean, 0, atol=1e-6)
+    assert "\n(5, 5, 24, 24) " in out and result.lightfield.shape == (5, 5, 24, 24)
+    printed = BlindParams.from_json(out[out.index("\n{") + 1:])
+    assert printed == BlindParams.preset("default").replace(path={"n_outer": 2, "n_restarts": 1}, final={"n_iter": 10})
+
+
+def _readme_result(ns, out, seconds):
+    # the README's comments: "(3, 3) control points", "(5, 5, 32, 32), (4, 3)", and a path file that states the
+    # blur's n_times and infinity_disparity and the views' size
+    from napari_lfdeblur.blind import BlindParams
+
+    assert np.shape(ns["cp"]) == (3, 3)
+    assert ns["result"].lightfield.shape == (5, 5, 32, 32) and ns["result"].control_points.shape == (4, 3)
+    np.testing.assert_allclose(ns["path"], ns["result"].control_points, atol=1e-12)
+    stated = ns["stated"]
+    n_times = BlindParams.preset("default").n_times
+    assert (stated["n_times"], stated["infinity_disparity"], stated["view_shape"]) == (n_times, 0.0, [32, 32])
+
+
+#: a line that marks a block -> the check of the outputs its text and comments state
+STATED = {
+    'print("PSNR blurred"': _deconvolution_gains,
+    "callback=lambda p: print(p.stage": _progress_lines,
+    'print("stopped after"': _stopped_early,
+    "print(result.params.to_json())": _blind_result,
+    "result.lightfield, result.control_points": _readme_result,
+}
+
+
+def test_every_stated_output_is_checked():
+    for marker in STATED:
+        assert sum(marker in code for code in _core_blocks()) == 1, marker
+
+
 @pytest.mark.parametrize("index", range(len(_core_blocks())))
-def test_core_example_runs(index, tmp_path, monkeypatch):
+def test_core_example_runs(index, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)  # examples may write files
     code = _core_blocks()[index]
     if "blind" in code:
         pytest.importorskip("napari_lfdeblur.blind")
-    exec(compile(code, f"{DOC.name}[core {index}]", "exec"), {"__name__": "__doc_example__"})
+    capsys.readouterr()
+    namespace, start = {"__name__": "__doc_example__"}, time.perf_counter()
+    exec(compile(code, f"{DOC.name}[core {index}]", "exec"), namespace)
+    seconds, out = time.perf_counter() - start, capsys.readouterr().out
+    for marker, check in STATED.items():
+        if marker in code:
+            check(namespace, out, seconds)
 
 
 def test_viewer_examples_run(tmp_path):

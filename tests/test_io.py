@@ -387,13 +387,36 @@ def test_writer_eslf_round_trip(tmp_path, lf_rgb):
 @pytest.mark.parametrize("name, layout", [("e.png", "eslf"), ("e.tif", "eslf"), ("m.png", "mosaic"),
                                           ("m.tif", "mosaic")])
 def test_a_mosaic_written_here_is_read_back_without_options(tmp_path, name, layout):
-    # 4x4 views of 12x18 px: the lenslet size has many candidates (2, 3, 4, 6) and a grid is never guessed
-    lf = np.random.default_rng(1).random((4, 4, 12, 18, 3)).astype(np.float32)
+    # views of 12x18 px: the lenslet size has many candidates (2, 3, 4, 6) and a grid is never guessed.
+    # ESLF needs V == U (4x4 views); the view-grid mosaic has 3 views down and 4 across, so that a grid stated
+    # as (U, V) instead of (V, U) cannot read back
+    V_, U_, Y_, X_ = (4, 4, 12, 18) if layout == "eslf" else (3, 4, 12, 18)
+    lf = np.random.default_rng(1).random((V_, U_, Y_, X_, 3)).astype(np.float32)
     p = write_lightfield(tmp_path / name, lf, layout=layout, bit_depth=16)
+    # the image, read by another tool, is the tiling built here: view (v, u) as block (v, u) of the grid, or
+    # pixel (v, u) of lenslet (y, x) in ESLF; and it states its layout under the key docs/io.md names
+    if layout == "eslf":
+        tiling = lf.transpose(2, 0, 3, 1, 4).reshape(Y_ * V_, X_ * U_, 3)
+        stated = {"layout": "eslf", "angular_size": 4}
+    else:
+        tiling = lf.swapaxes(1, 2).reshape(V_ * Y_, U_ * X_, 3)
+        stated = {"layout": "mosaic", "grid": [3, 4]}
+    if p.suffix == ".png":  # Pillow reads a 16-bit colour PNG as its high bytes
+        from PIL import Image
+
+        with Image.open(p) as im:
+            text = im.text["lfdeblur_layout"]
+        np.testing.assert_allclose(iio.imread(p) / 255, tiling, atol=1.01 / 255, rtol=0)
+    else:
+        with tifffile.TiffFile(p) as tif:
+            text = tif.shaped_metadata[0]["lfdeblur_layout"]
+            np.testing.assert_allclose(tif.asarray() / 65535, tiling, atol=0.5 / 65535 + 1e-7, rtol=0)
+    assert json.loads(text) == stated
     assert detect_layout(p) == probe_layout(p) == layout  # the file states it (no eslf in the name)
     back, meta = read_lightfield_with_metadata(p)
+    assert back.shape == lf.shape
     np.testing.assert_allclose(back, lf, atol=0.5 / 65535 + 1e-7)
-    assert meta.get("angular_size", 4) == 4 and meta.get("grid", [4, 4]) == [4, 4]
+    assert (meta["angular_size"] == 4) if layout == "eslf" else (meta["grid"] == [3, 4])
     # a statement that is not one (another tool's text under our key) is ignored, not an error
     from napari_lfdeblur.io._png import write_png
 
@@ -901,7 +924,7 @@ def _every_layout(folder, lf8):
     return out
 
 
-LAZY = ("views", "npy", "npy stack", "h5, axes permuted", "mat v7.3")  # read only the kept views
+LAZY = ("views", "npy", "npy stack", "h5, axes permuted", "mat v7.3")  # these read only the kept views
 
 
 def test_angular_crop_keeps_the_central_views_in_every_layout(tmp_path):
@@ -929,6 +952,35 @@ def test_angular_crop_reads_only_the_kept_views_where_the_layout_allows(tmp_path
             read_lightfield(path, angular_crop=3, max_bytes=lf8.size + 9 * lf8[0, 0].size * 4 + 100, **opts)
         with pytest.raises(InsufficientMemoryError):
             read_lightfield(path, max_bytes=whole - 100, **opts)
+
+
+def test_angular_crop_reads_only_the_kept_views_as_measured(tmp_path, monkeypatch):
+    # what is read, seen from outside the reader's own estimate. A folder: only the kept views' images are decoded
+    lf8 = np.random.default_rng(6).integers(0, 256, (9, 9, 8, 8, 3), dtype=np.uint8)
+    folder = _write_views(tmp_path / "views", lf8, lambda r, c: f"IMG_{r + 1:02d}_{c + 1:02d}")
+    decoded, read_image = [], _views.read_image
+    monkeypatch.setattr(_views, "read_image", lambda p: decoded.append(Path(p).name) or read_image(p))
+    np.testing.assert_array_equal(read_lightfield(folder, angular_crop=3), lf8[3:6, 3:6] / np.float32(255))
+    assert sorted(decoded) == [f"IMG_{r:02d}_{c:02d}.png" for r in (4, 5, 6) for c in (4, 5, 6)]
+    # the array files: the most memory the read allocates. The 3x3 kept views are 1/49 of these 21x21 views;
+    # they and their float32 copy take about 8 bytes a kept sample, 1/6 of the file's bytes, while a read of the
+    # whole array allocates at least the file's bytes; half of them lies far from both
+    import tracemalloc
+
+    big = np.random.default_rng(7).integers(0, 256, (21, 21, 32, 32, 3), dtype=np.uint8)
+    (tmp_path / "big").mkdir()
+    layouts = _every_layout(tmp_path / "big", big)
+    for name in LAZY[1:]:
+        path, opts = layouts[name]
+        read_lightfield(path, angular_crop=3, **opts)  # imports and caches of a first read are not counted
+        tracemalloc.start()
+        try:
+            out = read_lightfield(path, angular_crop=3, **opts)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        np.testing.assert_array_equal(out, big[9:12, 9:12] / np.float32(255), err_msg=name)
+        assert peak < big.nbytes / 2, (name, peak, big.nbytes)
 
 
 @pytest.mark.parametrize("crop", [0, 10, -1, 2.5, "3", True, (3, 3, 3), (3, 0)])
@@ -1123,3 +1175,14 @@ def test_a_crop_the_file_cannot_give_is_said_as_such_not_as_an_unreadable_file(t
     with pytest.raises(ValueError, match=rf"^{re.escape(str(p))}: angular_crop=99 must be n or \(n_v, n_u\)") as err:
         read_lightfield(p, angular_crop=99)
     assert not isinstance(err.value, LightFieldReadError)  # the file is readable: the request does not fit it
+
+
+def test_a_one_view_folder_written_here_reads_back(tmp_path):
+    """A 1 x 1 light field is a folder of one view beside write_lightfield's lightfield.json; a folder of one
+    image without it is not a light field (a single photo)."""
+    lf = np.random.default_rng(0).random((1, 1, 8, 8)).astype(np.float32)
+    folder = write_lightfield(tmp_path / "one", lf, bit_depth=16)
+    np.testing.assert_allclose(read_lightfield(folder), lf, atol=1e-4)
+    (folder / "lightfield.json").unlink()
+    with pytest.raises(LightFieldFormatError, match="holds no light-field views"):
+        read_lightfield(folder)

@@ -49,6 +49,11 @@ def test_opens_the_central_views_only(make_napari_viewer, qtbot, tmp_path, lf, n
     assert layer.metadata["layout"] == "h5"
     assert [kind for kind, _ in notifications] == ["info"]
     assert w.open_button.enabled
+    # an odd margin: docs/io.md puts the first kept view at ((V - n_v) // 2, (U - n_u) // 2) = (1, 1) for 4x2 of 7x5
+    w.views_v.value, w.views_u.value = 4, 2
+    layer = w.open_and_wait()
+    np.testing.assert_array_equal(layer.data, read_lightfield(path)[1:5, 1:3])
+    assert layer.metadata["angular_crop"] == [4, 2]
 
 
 def test_opening_again_adds_a_layer_and_replaces_nothing(make_napari_viewer, qtbot, tmp_path, lf, notifications):
@@ -91,6 +96,10 @@ def test_folder_of_views_with_a_chosen_layout(make_napari_viewer, qtbot, tmp_pat
     _open(qtbot, w)
     (layer,) = viewer.layers
     np.testing.assert_array_equal(layer.data, read_lightfield(folder)[1:6, 1:4])
+    # an odd margin: docs/io.md puts the first kept view at ((V - n_v) // 2, (U - n_u) // 2) = (1, 1) for 4x2 of 7x5
+    w.views_v.value, w.views_u.value = 4, 2
+    _open(qtbot, w)
+    np.testing.assert_array_equal(viewer.layers[-1].data, read_lightfield(folder)[1:5, 1:3])
 
 
 @pytest.mark.parametrize(

@@ -83,7 +83,6 @@ def test_reader_layer_tuple(tmp_path, lf_rgb):
 
 
 def test_reader_opens_the_camera_path_a_file_holds(tmp_path, lf_rgb):
-    from napari_lfdeblur._napari.layers import path_scale
     from napari_lfdeblur._napari.reader import read_lightfield_layer
     from napari_lfdeblur.path import bezier_positions, load_path_json
 
@@ -95,12 +94,13 @@ def test_reader_opens_the_camera_path_a_file_holds(tmp_path, lf_rgb):
     np.testing.assert_allclose(path_kw["metadata"]["control_points"], load_path_json(tmp_path / "out.path.json"))
     assert path_kw["metadata"]["n_times"] == 9 and path_kw["metadata"]["source_layer"] == "out"
     assert path_kw["metadata"]["infinity_disparity"] == -0.5  # the whole blur model goes with the path
-    # the polyline is the path at the file's 9 instants, in the frame of the centre view
+    # the polyline is the path at the file's 9 instants, in the frame of the centre view, drawn at
+    # min(Y, X) / (2 max(U, V)) = min(6, 7) / (2 * max(3, 4)) = 0.75 px a view (path_scale's documented overlay scale)
     V, U, Y, X = lf_rgb.shape[:4]
+    assert (V, U, Y, X) == (3, 4, 6, 7)
     (line,) = [s for s, k in zip(shapes, path_kw["features"]["kind"]) if k == "path"]
     pos = bezier_positions(cp, 9)
-    expected = np.stack([(Y - 1) / 2 + path_scale((V, U, Y, X)) * pos[:, 1],
-                         (X - 1) / 2 + path_scale((V, U, Y, X)) * pos[:, 0]], axis=1)
+    expected = np.stack([(Y - 1) / 2 + 0.75 * pos[:, 1], (X - 1) / 2 + 0.75 * pos[:, 0]], axis=1)
     np.testing.assert_allclose(line, expected, atol=1e-9)
 
 

@@ -475,8 +475,11 @@ def simulate_blur(lf, control_points, *, n_times: int = 32, infinity_disparity: 
     --------
     >>> import numpy as np
     >>> lf = np.random.default_rng(0).random((5, 5, 16, 16)).astype(np.float32)
-    >>> simulate_blur(lf, [[0, 0, 0], [0, 0, 0]]).shape  # a zero path is the identity
+    >>> zero_path = [[0, 0, 0], [0, 0, 0]]
+    >>> simulate_blur(lf, zero_path).shape
     (5, 5, 16, 16)
+    >>> bool(np.allclose(simulate_blur(lf, zero_path), lf))  # a zero path is the identity
+    True
     """
     arr = validate_lightfield(lf)
     n_times = validate_n_times(n_times)
