@@ -32,7 +32,7 @@ from napari_lfdeblur.priors import gradient_yx, sparse_gradient_prior
 from napari_lfdeblur.progress import run_to_completion, with_previews
 from napari_lfdeblur.samples import synthetic_scene
 
-from napari_lfdeblur.metrics import chamfer_distance, psnr
+from napari_lfdeblur.metrics import path_error, psnr
 
 # small and fast: the test cases use few iterations
 FAST = dict(path=dict(n_outer=2, steps=100, n_restarts=3), final={"n_iter": 15}, final_n_times=6)
@@ -112,11 +112,13 @@ def test_lowers_the_error_against_ground_truth(linear_case, linear_result):
 
 
 def test_recovers_a_linear_in_plane_path(linear_case, linear_result):
-    _, cp, _ = linear_case
+    sharp, cp, _ = linear_case
     est = _positions(linear_result.control_points)
     true = _positions(cp)
-    # order-blind comparison in the zero-mean gauge: Chamfer distance under a quarter of the 2-view extent
-    assert chamfer_distance(est, true) < 0.5
+    # the blur of the estimated path on the sharp light field is near the true one (docs/model.md, "Judging an
+    # estimate"): a mismatch of 1 is no blur at all, and the true path's direction at a fraction s of its length
+    # scores about 1 - s, so this asks for its direction and over half its length (measured: 0.39)
+    assert path_error(linear_result.control_points, cp, lightfield=sharp).blur_mismatch < 0.55
     # and the direction of motion agrees within 20 degrees (up to sign)
     d_est = est[-1, :2] - est[0, :2]
     d_true = true[-1, :2] - true[0, :2]
@@ -278,7 +280,7 @@ def test_path_disagreement_is_zero_for_one_path_symmetric_and_one_against_no_blu
 
 
 def test_two_halves_estimated_apart_agree_on_a_clear_blur(linear_case):
-    _, cp, blurred = linear_case
+    sharp, cp, blurred = linear_case
     g = torch.as_tensor(blurred[..., None])
     Y, X = g.shape[2:4]
     p = BlindParams().replace(n_control_points=2, **FAST)
@@ -288,8 +290,12 @@ def test_two_halves_estimated_apart_agree_on_a_clear_blur(linear_case):
                                  lambda item: parts.append(item[0]))
     assert d <= _evidence.AGREEMENT_MARGIN and len(paths) == 2
     assert parts[0] == 0 and parts[-1] == 1 and parts == sorted(parts)  # records say which part they come from
-    for path in paths:  # each half finds the camera's path
-        assert chamfer_distance(_positions(path), _positions(cp)) < 0.5
+    d_true = cp[-1, :2] - cp[0, :2]
+    for path in paths:  # each half finds the camera's path: over half its length (measured: 0.40) ...
+        assert path_error(path, cp, lightfield=sharp).blur_mismatch < 0.55
+        # ... and its direction within 20 degrees, up to sign (measured: 13 and 14 degrees)
+        d_est = path[-1, :2] - path[0, :2]
+        assert abs(d_est @ d_true) / (np.linalg.norm(d_est) * np.linalg.norm(d_true)) > np.cos(np.radians(20))
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), "half"])
@@ -583,10 +589,20 @@ def test_paper_preset_is_the_published_settings():
 
 def test_joint_method_runs():
     lf = _scene((5, 5, 16, 16), seed=5)
-    blurred = simulate_blur(lf, linear_path(1.5), n_times=8)
-    p = BlindParams.preset("paper").replace(joint={"n_iter": 5}, final={"n_iter": 2})
+    cp = linear_path(1.5)
+    blurred = simulate_blur(lf, cp, n_times=8)
+    p = BlindParams.preset("paper").replace(joint={"n_iter": 100}, final={"n_iter": 10})
     res = blind_deblur(blurred, params=p, device="cpu")
-    assert res.lightfield.shape == lf.shape and len(res.loss_history) == 5
+    assert res.lightfield.shape == lf.shape and len(res.loss_history) == 100
+    # the joint Adam fits: its loss falls (measured: to 0.50 of the first; the prior's decaying weight alone,
+    # with the path and the light field held, lowers it to 0.86) ...
+    assert res.loss_history[-1] < 0.75 * res.loss_history[0]
+    # ... towards the camera's path, whose blur of the sharp light field is near the true one (measured: 0.06;
+    # 1 is no blur: a path left at its random start is rejected by the evidence check and returned as zero) ...
+    assert res.info["restoration"] == "full"
+    assert path_error(res.control_points, cp, lightfield=lf).blur_mismatch < 0.3
+    # ... and the light field restored with it is nearer the sharp one (measured: +9.0 dB)
+    assert psnr(res.lightfield, lf) > psnr(blurred, lf) + 4.0
 
 
 def test_bad_input_gives_clear_errors():
@@ -1133,7 +1149,10 @@ def test_windows_name_where_the_path_is_estimated():
         est, true = _positions(res.control_points), _positions(cp)
         d_est, d_true = est[-1, :2] - est[0, :2], true[-1, :2] - true[0, :2]
         cos = abs(d_est @ d_true) / (np.linalg.norm(d_est) * np.linalg.norm(d_true))
-        assert cos > np.cos(np.radians(20)) and chamfer_distance(est, true) < 0.5  # that half's motion
+        assert cos > np.cos(np.radians(20))  # that half's motion
+        # and its extent: the blur of the estimate on the sharp light field is near that of that half's path
+        # (measured: 0.27 and 0.16; 1 would be no blur, and the other half's path scores over 1)
+        assert path_error(res.control_points, cp, lightfield=sharp).blur_mismatch < 0.45
     # windows the solver cannot take: clear errors before any work
     for bad, said in (([], "non-empty"), ([(0, 0, 40)], "non-empty list of"), ([(0, 0, 40.5, 40)], "whole numbers"), ((0, 0, 40, 40), "a list of"),
                       ([(0, 0, 8, 40)], "smaller than 16 x 16"), ([(0, 50, 40, 40)], "reaches outside the 40 x 80"),

@@ -222,6 +222,26 @@ def test_pure_roll_keeps_the_centre_pixel_of_the_centre_view():
     assert out[2, 2, 10, 15, 0] == pytest.approx(lf[2, 2, 10, 15, 0], abs=1e-6)
     # ...and turns everything away from the centre
     assert np.abs(out - lf).max() > 0.1
+    # a one-sided roll on ramps along x and along y: the blurred value minus the sharp one is the displacement
+    # itself, R (x~' - x~) = -R r_z y~ and R (y~' - y~) = R r_z x~ (docs/model.md, "Camera rotation"), averaged over
+    # the instants; at most 1.2 px, so 2 px away from the border no lookup is clamped
+    V, U, Y, X = 5, 5, 21, 31
+    R = max(X, Y) / 2
+    xt, yt = (np.arange(X) - (X - 1) / 2) / R, (np.arange(Y) - (Y - 1) / 2) / R
+    roll[:, 5] = [0.0, 0.08]
+    r_mean = np.linspace(0.0, 0.08, 16).mean()  # r_z at the instants t_k = k / 15
+    ramp_x = np.broadcast_to(np.arange(X, dtype=np.float32), (V, U, Y, X)).copy()
+    ramp_y = np.broadcast_to(np.arange(Y, dtype=np.float32)[:, None], (V, U, Y, X)).copy()
+    shift_x = (simulate_blur(ramp_x, roll, n_times=16) - ramp_x)[:, :, 2:-2, 2:-2]
+    shift_y = (simulate_blur(ramp_y, roll, n_times=16) - ramp_y)[:, :, 2:-2, 2:-2]
+    want_x = np.broadcast_to(-R * r_mean * yt[2:-2, None], shift_x.shape)
+    want_y = np.broadcast_to(R * r_mean * xt[None, 2:-2], shift_y.shape)
+    np.testing.assert_allclose(shift_x, want_x, atol=1e-4)
+    np.testing.assert_allclose(shift_y, want_y, atol=1e-4)
+    # in words: the row through the centre is not displaced along x, the column through it not along y; a pixel
+    # below the centre (y~ > 0) samples to its left, one to the right of it (x~ > 0) below it: the turn's sign
+    assert np.abs(shift_x[:, :, (Y - 1) // 2 - 2]).max() < 1e-4 and np.abs(shift_y[..., (X - 1) // 2 - 2]).max() < 1e-4
+    assert shift_x[2, 2, -1, 13] < -0.3 and shift_y[2, 2, 8, -1] > 0.3
 
 
 def test_pure_yaw_shifts_the_views_by_R_r():
@@ -237,8 +257,18 @@ def test_pure_yaw_shifts_the_views_by_R_r():
     assert shift[1, 1, 16, 32] == pytest.approx(R * r, rel=1e-5)
     centre = shift[:, :, :, 24:41]
     assert np.all(np.abs(centre - R * r) <= 0.07 * R * r)
-    # towards the edges the perspective term r x~^2 grows the shift: the image is not just translated
-    assert shift[1, 1, 16, 60] > 1.5 * R * r
+    # towards the edges the perspective term r x~^2 grows the shift: the image is not just translated. Exactly
+    # R (x~' - x~) = R r_y (1 + x~^2) px (docs/model.md, "Camera rotation") wherever the lookup stays inside the
+    # view (x + shift <= 64: the columns up to 61)
+    xt, yt = (np.arange(X) - (X - 1) / 2) / R, (np.arange(Y) - (Y - 1) / 2) / R
+    np.testing.assert_allclose(shift[..., :62], np.broadcast_to(R * r * (1 + xt[:62] ** 2), shift[..., :62].shape),
+                               atol=1e-4)
+    # along y, a ramp along y: R (y~' - y~) = R r_y x~ y~, a sample from below where x~ and y~ have the same sign,
+    # from above where they differ (at most 0.8 px, so away from the top and bottom rows no lookup is clamped)
+    ramp_y = np.broadcast_to(np.arange(Y, dtype=np.float32)[:, None], (V, U, Y, X)).copy()
+    shift_y = (simulate_blur(ramp_y, yaw, n_times=4) - ramp_y)[:, :, 1:-1]
+    np.testing.assert_allclose(shift_y, np.broadcast_to(R * r * np.outer(yt[1:-1], xt), shift_y.shape), atol=1e-4)
+    assert shift_y[1, 1, -1, 60] > 0.5 and shift_y[1, 1, 0, 60] < -0.5
 
 
 def test_rotation_is_in_the_zero_mean_gauge_like_translation():
