@@ -581,3 +581,29 @@ def test_an_output_may_not_replace_its_inputs_path_file(tmp_path):
     with pytest.raises(ValueError, match="would replace its path file"):
         deblur_many([src], tmp_path, params=TINY, device="cpu", overwrite=True)
     assert path_file.read_bytes() == kept and not (tmp_path / "a.npz").exists()
+
+
+def test_items_on_one_workers_threads_keep_their_own_warnings_and_leave_the_process_as_it_was(tmp_path):
+    """A worker may run several items at once on its threads: each record lists the warnings its own item raised
+    (a light field whose view axes are swapped warns when read); the warnings machinery and torch's thread count
+    are as before once the batch is over (an in-process cluster shares them with the caller)."""
+    import warnings
+
+    import torch
+
+    from napari_lfdeblur import synthetic_scene
+
+    (tmp_path / "in").mkdir()
+    lf, _ = synthetic_scene((5, 5, 24, 24), seed=0)
+    write_lightfield(tmp_path / "in" / "a_swapped.npz", np.ascontiguousarray(lf.transpose(1, 0, 2, 3)))
+    for i in range(3):
+        write_lightfield(tmp_path / "in" / f"ok{i}.npz", synthetic_scene((5, 5, 24, 24), seed=i + 1)[0])
+    show, filters, n_threads = warnings.showwarning, list(warnings.filters), torch.get_num_threads()
+    with distributed.Client(processes=False, n_workers=1, threads_per_worker=4, dashboard_address=":0") as client:
+        report = simulate_dataset(str(tmp_path / "in" / "*.npz"), tmp_path / "out", n_per_input=2, n_times=4,
+                                  client=client, device="cpu")
+    assert report.n_ok == 8
+    for name, rec in read_manifest(tmp_path / "out").items():
+        swapped = any("ViewOrderWarning" in w for w in rec["warnings"])
+        assert swapped is name.startswith("a_swapped"), (name, rec["warnings"])
+    assert warnings.showwarning is show and warnings.filters == filters and torch.get_num_threads() == n_threads

@@ -319,6 +319,30 @@ def test_arrays_of_any_byte_order_or_float_width_and_tensors_with_grad_are_blurr
                                   simulate_blur(lf, cp, n_times=8))
 
 
+def test_the_first_fused_loop_leaves_torchs_thread_count_as_the_caller_set_it():
+    """numba's OpenMP pool, started by the process's first loop, sets the thread's OpenMP count (torch's) to
+    every core; the caller's torch.set_num_threads(1) stands (a fresh process: the first loop is the test)."""
+    import os
+    import subprocess
+    import sys
+
+    pytest.importorskip("numba")
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("one core: every count is 1")
+    code = ("import numpy as np, torch\n"
+            "torch.set_num_threads(1)\n"
+            "from napari_lfdeblur import _fused, simulate_blur\n"
+            "assert _fused.available('cpu'), 'the fused loops are off'\n"
+            "simulate_blur(np.zeros((3, 3, 8, 8), np.float32), [[-1, 0, 0], [1, 0, 0]], n_times=4)\n"
+            "print(torch.get_num_threads())\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "NAPARI_LFDEBLUR_NUMBA")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    if "the fused loops are off" in out.stderr:
+        pytest.skip("the fused loops are off")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["1"]
+
+
 def test_the_fused_loops_leave_numbas_thread_count_as_it_was():
     numba = pytest.importorskip("numba")
     from napari_lfdeblur import _fused

@@ -710,6 +710,26 @@ def test_blind_live_redraws_are_spaced_by_their_cost(make_napari_viewer, monkeyp
     assert drawn == [True, True]
 
 
+def test_overlapping_runs_leave_the_sessions_warnings_as_they_were(make_napari_viewer, qtbot, lf):
+    """Two widgets' runs at once, the first started ending first: warnings raised after them are shown as
+    before (not sent to a finished worker), under the filters there were."""
+    import warnings
+
+    from napari_lfdeblur._napari.widgets import DeconvolveWidget
+
+    viewer, layer, _, blind_widget = _blind_dock(make_napari_viewer, lf)
+    blind_widget.form.n_iter.value, blind_widget.form.tv_iter.value = 2, 10
+    deconvolve_widget = _dock(viewer, DeconvolveWidget(viewer))
+    deconvolve_widget.layer_combo.value = layer
+    deconvolve_widget.form.n_iter.value = 3
+    show, filters = warnings.showwarning, list(warnings.filters)
+    deconvolve_widget.run()
+    blind_widget.run()
+    for w in (deconvolve_widget, blind_widget):
+        _wait_done(qtbot, w)
+    assert warnings.showwarning is show and warnings.filters == filters
+
+
 def test_blind_unavailable_device_notifies(make_napari_viewer, lf, notifications):
     pytest.importorskip("napari_lfdeblur.blind")
     import torch

@@ -81,17 +81,21 @@ def _run(name, *args):
 def call(loop, *args):
     """Run the compiled parallel ``loop`` on ``args`` with torch's number of threads, one loop at a time.
 
-    numba's thread count (a setting of the calling thread) is put back afterwards.
+    numba's thread count (a setting of the calling thread) is put back afterwards, and so is torch's: numba's
+    OpenMP pool, started by the first call, sets the calling thread's OpenMP count (torch's) to every core.
     """
     import numba
 
+    want = torch.get_num_threads()  # read before numba's pool may start
     with _LOCK:
         before = numba.get_num_threads()
-        numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
+        numba.set_num_threads(max(1, min(want, numba.config.NUMBA_NUM_THREADS)))
         try:
             loop(*args)
         finally:
             numba.set_num_threads(before)
+            if torch.get_num_threads() != want:
+                torch.set_num_threads(want)
 
 
 def check_writable(t: torch.Tensor) -> None:

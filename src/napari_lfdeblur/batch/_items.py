@@ -7,10 +7,12 @@ Light fields never travel between the client, the scheduler and the workers.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
 import socket
+import threading
 import time
 import warnings
 from numbers import Real
@@ -263,24 +265,63 @@ def run_item(spec: dict) -> dict:
     t0 = time.perf_counter()
     rec = {"status": "failed", "error": None, "size": None, "shape": None, "recovered": False,
            "worker": f"{socket.gethostname()}:{os.getpid()}"}
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with _item_scope() as caught:
         _run(spec, Path(spec["output"]), rec)
-    rec["warnings"] = sorted({f"{w.category.__name__}: {w.message}"[:500] for w in caught})
+    rec["warnings"] = sorted({w[:500] for w in caught})
     rec["time"] = round(time.perf_counter() - t0, 4)
     return rec
 
 
-def _run(spec: dict, out: Path, rec: dict) -> None:
-    """The body of :func:`run_item`: fills ``rec`` in place."""
+#: what the items running in this process share: how many run, and what they changed (put back by the last)
+_SCOPE = {"lock": threading.Lock(), "depth": 0, "saved": None}
+_THREAD = threading.local()  # the item of the thread (its list of warnings)
+
+
+@contextlib.contextmanager
+def _item_scope():
+    """While items run in this process (a worker may run several at once, on its threads): a warning goes to
+    the list of the item whose thread raised it (others are shown as before), every time it is raised, and
+    torch runs on one thread. The last item to end puts the warnings machinery and torch's thread count back.
+    (``warnings.catch_warnings`` would not do: it is process-wide, and items that overlap undo each other's.)"""
     import torch
 
+    with _SCOPE["lock"]:
+        if _SCOPE["depth"] == 0:
+            _SCOPE["saved"] = (warnings.showwarning, list(warnings.filters), torch.get_num_threads())
+            warnings.showwarning = _to_the_item
+            warnings.simplefilter("always")
+        _SCOPE["depth"] += 1
+    torch.set_num_threads(1)  # this thread's, and the default of threads that start
+    _THREAD.caught = caught = []
+    try:
+        yield caught
+    finally:
+        _THREAD.caught = None
+        with _SCOPE["lock"]:
+            _SCOPE["depth"] -= 1
+            if _SCOPE["depth"] == 0:
+                show, filters, n_threads = _SCOPE["saved"]
+                warnings.showwarning = show
+                warnings.filters[:] = filters
+                getattr(warnings, "_filters_mutated", lambda: None)()  # as catch_warnings does: "once" forgets
+                torch.set_num_threads(n_threads)
+
+
+def _to_the_item(message, category, filename, lineno, file=None, line=None):
+    caught = getattr(_THREAD, "caught", None)
+    if caught is None:  # a thread that runs no item
+        _SCOPE["saved"][0](message, category, filename, lineno, file, line)
+    else:
+        caught.append(f"{category.__name__}: {message}")
+
+
+def _run(spec: dict, out: Path, rec: dict) -> None:
+    """The body of :func:`run_item`: fills ``rec`` in place."""
     from ..devices import select_device
     from ..io import read_lightfield_with_metadata, write_lightfield
     from ..path import save_path_json
 
     try:
-        torch.set_num_threads(1)
         device = select_device(spec["device"])
         rec["device"] = str(device)
         kept = _recover(spec, out) if out.exists() and not spec["overwrite"] else None

@@ -21,6 +21,7 @@ import logging
 import threading
 import time
 import traceback
+import warnings
 
 import numpy as np
 from magicgui.widgets import Container, Label, ProgressBar, PushButton
@@ -38,6 +39,26 @@ log = logging.getLogger(__name__)
 PREVIEW_SHARE = 20.0
 
 __all__ = ["PREVIEW_SHARE", "ProgressPanel", "SolverWidget", "format_seconds"]
+
+#: the widgets' runs going on, and the warnings machinery as it was before the first of them. Each superqt
+#: worker swaps it process-wide while it runs and puts back what it found, so runs that overlap would leave a
+#: finished worker's in place (every later warning of the session sent to it, none shown); the last run to end
+#: puts back what the first found.
+_WARNINGS = {"runs": 0, "saved": None}
+
+
+def _run_starts() -> None:
+    if _WARNINGS["runs"] == 0:
+        _WARNINGS["saved"] = (warnings.showwarning, list(warnings.filters))
+    _WARNINGS["runs"] += 1
+
+
+def _run_ends() -> None:
+    _WARNINGS["runs"] = max(0, _WARNINGS["runs"] - 1)
+    if _WARNINGS["runs"] == 0 and _WARNINGS["saved"] is not None:
+        warnings.showwarning, warnings.filters[:] = _WARNINGS["saved"][0], _WARNINGS["saved"][1]
+        getattr(warnings, "_filters_mutated", lambda: None)()  # as catch_warnings does: "once" forgets
+        _WARNINGS["saved"] = None
 
 
 def format_seconds(seconds: float) -> str:
@@ -280,6 +301,7 @@ class SolverWidget(Container):
         self.worker = worker
         self.run_button.enabled = False
         self.cancel_button.enabled = True
+        _run_starts()
         worker.start()
         return worker
 
@@ -372,6 +394,7 @@ class SolverWidget(Container):
         notify_info(f"{self.title}: cancelled")
 
     def _on_finished(self):
+        _run_ends()  # on the main thread, after the worker put back what it found
         for gen in self._kept:  # the worker has ended: a run it quit is suspended, and is closed here
             gen.close()
         self._kept = []
