@@ -583,6 +583,7 @@ def test_an_output_may_not_replace_its_inputs_path_file(tmp_path):
     assert path_file.read_bytes() == kept and not (tmp_path / "a.npz").exists()
 
 
+@pytest.mark.filterwarnings("ignore:Port .* is already in use")  # the module's cluster holds distributed's port
 def test_items_on_one_workers_threads_keep_their_own_warnings_and_leave_the_process_as_it_was(tmp_path):
     """A worker may run several items at once on its threads: each record lists the warnings its own item raised
     (a light field whose view axes are swapped warns when read); the warnings machinery and torch's thread count

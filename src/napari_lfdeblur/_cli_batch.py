@@ -63,8 +63,9 @@ def add_batch(sub) -> None:
     _common(p)
     p.add_argument("--n-per-input", type=int, default=1, metavar="K", help="items per input (default 1)")
     p.add_argument("--path-kind", default="random", choices=PATH_KINDS, help="kind of path (default random)")
-    p.add_argument("--extent", default="2", help="in views, or MIN:MAX to draw it (default 2): the length of linear and arc, the side of the box "
-                   "of the random control points of shake, shake6 and random")
+    p.add_argument("--extent", default="2",
+                   help="in views, or MIN:MAX to draw it (default 2): the length of linear and arc, the side of the "
+                   "box of the random control points of shake, shake6 and random")
     p.add_argument("--noise", type=float, default=0.0, help="Gaussian noise standard deviation (default 0)")
     p.add_argument("--n-times", type=int, default=32, help="exposure instants T (default 32)")
     p = kinds.add_parser("deblur", help="deblur each input blindly")

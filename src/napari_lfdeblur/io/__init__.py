@@ -312,8 +312,9 @@ def _read_path_beside(path: Path, metadata: dict) -> None:
     that hold no path themselves. Its ``control_points`` (and the
     ``n_times`` and ``infinity_disparity`` it states) go to the top level,
     its name to ``path_file``. A file there that holds no valid path
-    (:func:`~napari_lfdeblur.path.read_path_json`) is ignored with a warning: the light field is read all the same. One that
-    names (``lightfield``) another light field of the same name that is
+    (:func:`~napari_lfdeblur.path.read_path_json`) is ignored with a
+    warning: the light field is read all the same. One that names
+    (``lightfield``) another light field of the same name that is
     there too (``a.npz``'s beside ``a.npy``: both would read ``a.path.json``)
     is that one's and is left alone. A path
     file that states views of another size than the light field's (it was

@@ -42,7 +42,7 @@ __all__ = ["PREVIEW_SHARE", "ProgressPanel", "SolverWidget", "format_seconds"]
 
 #: the widgets' runs going on, and the warnings machinery as it was before the first of them. Each superqt
 #: worker swaps it process-wide while it runs and puts back what it found, so runs that overlap would leave a
-#: finished worker's in place (every later warning of the session sent to it, none shown); the last run to end
+#: finished worker's in place (every later warning sent to it, none shown); the last run to end
 #: puts back what the first found.
 _WARNINGS = {"runs": 0, "saved": None}
 
