@@ -69,6 +69,16 @@ def test_host_memory_matches_proc_meminfo():
     assert free_memory("cpu") == pytest.approx(got, rel=0.1)
 
 
+@pytest.mark.skipif(not Path("/proc/meminfo").exists(), reason="needs /proc/meminfo")
+def test_host_memory_without_psutil_reads_proc_meminfo_in_bytes(monkeypatch):
+    import sys
+
+    psutil = pytest.importorskip("psutil")
+    want = psutil.virtual_memory().available
+    monkeypatch.setitem(sys.modules, "psutil", None)  # as where psutil is not installed: its import fails
+    assert host_available_memory() == pytest.approx(want, rel=0.1)
+
+
 def test_cpu_fallback_passes_a_cpu_run_through_and_reraises_cpu_errors():
     from napari_lfdeblur.devices import run_with_cpu_fallback
     from napari_lfdeblur.progress import run_to_completion

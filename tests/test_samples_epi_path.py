@@ -394,3 +394,37 @@ def test_bad_arguments_of_the_helpers_are_clear_errors(call, words):
     lf = np.random.default_rng(0).random((3, 3, 8, 8))
     with pytest.raises(ValueError, match=words):
         call(lf)
+
+
+def test_arc_path_is_a_chord_of_its_length_bowed_by_bend_times_it():
+    from napari_lfdeblur.path import arc_path
+
+    for length, bend, angle in ((2.0, 0.5, 0.0), (3.0, -0.2, 30.0), (1.0, 0.0, 90.0)):
+        pos = bezier_positions(arc_path(length, bend, angle), 3)[:, :2]  # t = 0, 1/2, 1
+        chord = pos[2] - pos[0]
+        assert np.isclose(np.linalg.norm(chord), length)
+        assert np.isclose(np.degrees(np.arctan2(chord[1], chord[0])), angle)
+        # the curve's middle lies bend * length from the chord's middle, across it (to the left for bend > 0)
+        offset = pos[1] - (pos[0] + pos[2]) / 2
+        across = np.array([-chord[1], chord[0]]) / length
+        np.testing.assert_allclose(offset, bend * length * across, atol=1e-12)
+
+
+def test_shake6_rotations_stay_within_the_stated_largest_and_the_preset_default_is_0_005():
+    for seed in range(40):
+        cp = shake6_path(extent=2.0, seed=seed, rotation=0.01)
+        assert np.abs(cp[:, 3:]).max() <= 0.01 + 1e-15
+    # the preset's documented default rotation, 0.005 rad
+    np.testing.assert_array_equal(preset_path("shake6", 2.0, 3), shake6_path(extent=2.0, seed=3, rotation=0.005))
+
+
+def test_canonical_time_direction_follows_the_translation_before_the_rotation():
+    from napari_lfdeblur.path import canonical_time_direction
+
+    # the translation ends further along +x, the rotation goes the other way by more: kept as it is
+    cp = np.array([[0.0, 0, 0, 0.1, 0, 0], [0.05, 0, 0, -0.1, 0, 0]])
+    np.testing.assert_array_equal(canonical_time_direction(cp), cp)
+    np.testing.assert_array_equal(canonical_time_direction(cp[::-1]), cp)
+    # no translation between the ends: the rotation decides
+    roll = np.array([[0.0, 0, 0, 0, 0, 0.05], [0.0, 0, 0, 0, 0, -0.05]])
+    np.testing.assert_array_equal(canonical_time_direction(roll), roll[::-1])
