@@ -726,7 +726,7 @@ def test_params_json_round_trip_and_overrides():
             with pytest.raises(TypeError, match=f"{field} must be true or false"):
                 DeconvolutionParams.from_dict({field: value})
     assert DeconvolutionParams(isotropic=np.bool_(True)).isotropic is True
-    for bad in ("1111", "2111", (1, 1, "2", 1), (1, 1, True, 1), (1, 1, 1)):  # a string was read per character
+    for bad in ("1111", "2111", (1, 1, "2", 1), (1, 1, True, 1), (1, 1, 1), (1, 1, -1, 1)):  # a string: per character
         with pytest.raises(ValueError, match="axis_weights must be 4 non-negative numbers"):
             DeconvolutionParams(axis_weights=bad)
     lf = np.random.default_rng(7).random((3, 3, 6, 6)).astype(np.float32)
@@ -928,3 +928,23 @@ def test_inplane_refuses_what_it_cannot_solve_and_says_what_to_use():
         args = {"control_points": cp, **kwargs}
         with pytest.raises(ValueError, match=r"needs an in-plane path .* Use method 'tv' \(command line: --method tv\)"):
             deconvolve(lf, args.pop("control_points"), n_times=4, method="inplane", **args)
+
+
+@pytest.mark.parametrize("grid", [(3, 3), (3, 4)])
+def test_inplane_with_a_weight_is_the_tikhonov_optimum_on_the_angular_differences(grid):
+    """'inplane' solves min |K l - f|^2 / 2 + w |D_vu l|^2 / 2 (D_vu: forward differences along v and u): its
+    result zeroes the gradient K^T (K l - f) + w D_vu^T D_vu l (D_vu^T D_vu: laplacian4d on the v, u axes)."""
+    import torch
+
+    from napari_lfdeblur.blur import BlurOperator
+    from napari_lfdeblur.priors import laplacian4d
+
+    V, U = grid
+    lf = np.random.default_rng(0).random((V, U, 6, 7)).astype(np.float32)
+    cp, w = linear_path(1.3, angle_deg=30), 0.05
+    f = simulate_blur(lf, cp, n_times=8)
+    out = deconvolve(f, cp, n_times=8, method="inplane", weight=w, clip=False, device="cpu")
+    op = BlurOperator((V, U, 6, 7, 1), cp, n_times=8, device="cpu")
+    residual = op.forward(torch.from_numpy(out)[..., None]) - torch.from_numpy(f)[..., None]
+    gradient = op.adjoint(residual)[..., 0].double() + w * laplacian4d(torch.from_numpy(out).double(), (1, 1, 0, 0))
+    assert float(gradient.abs().max()) < 1e-5

@@ -82,6 +82,10 @@ def test_scene_disparity_finds_a_plane():
         est = scene_disparity(torch.as_tensor(lf)[..., None])
         assert np.median(est[4:-4, 4:-4]) == pytest.approx(d, abs=0.07)
     assert scene_disparity(torch.zeros(3, 3, 8, 8, 1), 2.0).shape == (8, 8)
+    # with d_inf, the search reaches |d_inf| further: a plane at 3.5 px/view (beyond the reach alone) is found
+    lf = plane_lightfield((5, 5, 32, 32), 3.5)
+    est = scene_disparity(torch.as_tensor(lf)[..., None], 2.0)
+    assert np.median(est[6:-6, 6:-6]) == pytest.approx(3.5, abs=0.07)
 
 
 @pytest.mark.parametrize("isotropic, coupled", [(True, True), (True, False), (False, True), (False, False)])

@@ -247,3 +247,19 @@ def test_axis_weights_are_four_finite_non_negative_numbers(weights):
 
     with pytest.raises(ValueError, match="axis_weights must be 4 non-negative numbers"):
         tv4d(torch.zeros(2, 2, 3, 3, 1), axis_weights=weights)
+
+
+def test_smoothed_tv_and_the_sparse_gradient_prior_of_one_step_are_their_formulas():
+    """One step of height h along x: tv4d's smoothing is sqrt(h^2 + eps^2) - eps per step (0 where flat), the
+    sparse-gradient prior min(h^2 / eps^2, 1) per step, averaged over the field (its differences are the field's
+    shape, the last one 0)."""
+    from napari_lfdeblur.priors import sparse_gradient_prior, tv4d
+
+    L = torch.zeros(2, 2, 3, 4, 1, dtype=torch.float64)
+    L[..., 2:, :] = 0.3  # a step between x = 1 and x = 2 in every row: 2 * 2 * 3 steps of height 0.3
+    eps, h, steps = 0.1, 0.3, 12
+    assert float(tv4d(torch.zeros_like(L), eps=eps)) == 0.0  # flat: no cost, not eps per difference
+    assert float(tv4d(L, eps=eps, isotropic=False)) == pytest.approx(steps * (math.sqrt(h * h + eps * eps) - eps))
+    n = L.numel()
+    assert float(sparse_gradient_prior(L, eps=0.6)) == pytest.approx(steps * (h * h / 0.36) / n)
+    assert float(sparse_gradient_prior(L, eps=0.1)) == pytest.approx(steps / n)  # each step costs 1

@@ -180,8 +180,11 @@ def test_epis_are_the_right_slices():
             assert v[vv, y] == lf[vv, 3, y, 4]
     col = np.random.default_rng(0).random((3, 4, 5, 6, 3))
     np.testing.assert_array_equal(horizontal_epi(col), col[1, :, 2, :])
-    with pytest.raises(ValueError, match="out of range"):
-        horizontal_epi(lf, v=3)
+    # lf[v, :, y, :] as numpy indexes it: negative indices count from the end, down to the first
+    np.testing.assert_array_equal(horizontal_epi(lf, v=-3, y=-5), lf[0, :, 0, :])
+    for bad in ({"v": 3}, {"v": -4}):
+        with pytest.raises(ValueError, match="out of range"):
+            horizontal_epi(lf, **bad)
     with pytest.raises(TypeError, match="integer"):
         vertical_epi(lf, u=1.5)
 
