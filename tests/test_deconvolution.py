@@ -948,3 +948,14 @@ def test_inplane_with_a_weight_is_the_tikhonov_optimum_on_the_angular_difference
     residual = op.forward(torch.from_numpy(out)[..., None]) - torch.from_numpy(f)[..., None]
     gradient = op.adjoint(residual)[..., 0].double() + w * laplacian4d(torch.from_numpy(out).double(), (1, 1, 0, 0))
     assert float(gradient.abs().max()) < 1e-5
+
+
+def test_the_plane_texture_sharpening_multiplies_each_frequency_by_one_plus_zeta_times_its_max_norm():
+    """recover_plane_texture's correction multiplies the spectrum by 1 + zeta |Omega|, |Omega| = max(|Omega_x|,
+    |Omega_y|) rad/px: a checkerboard, all at (pi, pi), is scaled by 1 + zeta pi; stripes at (0, pi) likewise."""
+    from napari_lfdeblur.special_cases import _sharpen_slice
+
+    y, x = np.indices((16, 16))
+    for pattern in (np.where((y + x) % 2, 1.0, -1.0), np.where(x % 2, 1.0, -1.0)):
+        out = _sharpen_slice(pattern.astype(np.float32), 0.5, 0.0)
+        np.testing.assert_allclose(out, (1 + 0.5 * np.pi) * pattern, rtol=1e-5)
