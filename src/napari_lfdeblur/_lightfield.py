@@ -1,15 +1,18 @@
-"""The one check of light-field arrays, and of scalar arguments, shared by every module (numpy only)."""
+"""The one check of light-field arrays, and of scalar arguments, shared by every module (numpy only); and the
+warnings helpers the modules share."""
 
 from __future__ import annotations
 
 import math
 import os
 import sys
+import warnings
 
 import numpy as np
 
 __all__ = ["check_int", "check_view_grid", "check_number", "check_seed", "check_infinity_disparity",
-           "validate_lightfield", "brightest", "white_level", "caller_stacklevel", "DARK_LEVEL", "BRIGHT_LIMIT",
+           "validate_lightfield", "brightest", "white_level", "caller_stacklevel", "warnings_state",
+           "restore_warnings", "DARK_LEVEL", "BRIGHT_LIMIT",
            "MAX_SEED"]
 
 #: A light field whose :func:`brightest` value is below this is dark: the blind solver's salient-edge
@@ -41,6 +44,17 @@ def caller_stacklevel() -> int:
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(package + os.sep):
         frame, level = frame.f_back, level + 1
     return level
+
+
+def warnings_state() -> tuple:
+    """The process-wide warnings machinery (``showwarning`` and the filters), for :func:`restore_warnings`."""
+    return warnings.showwarning, list(warnings.filters)
+
+
+def restore_warnings(state: tuple) -> None:
+    """Put back a :func:`warnings_state`, as ``warnings.catch_warnings`` does on exit ("once" forgets)."""
+    warnings.showwarning, warnings.filters[:] = state[0], state[1]
+    getattr(warnings, "_filters_mutated", lambda: None)()
 
 
 def brightest(lf) -> float:

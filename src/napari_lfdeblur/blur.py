@@ -318,8 +318,6 @@ class BlurOperator:
             cp = control_points.to(device=self.device, dtype=dtype)
             if cp.ndim != 2 or cp.shape[1] not in (3, 6):
                 raise ValueError(f"control points must be (n, 3) or (n, 6); got {tuple(cp.shape)}")
-            if not torch.isfinite(cp.detach()).all():
-                raise ValueError("control points contain NaN or Inf")
             if cp.shape[1] == 6 and float(cp.detach()[:, 3:].abs().max()) > MAX_ROTATION * (1 + 1e-5):  # (rounding)
                 raise ValueError(f"rotations must stay within {MAX_ROTATION} rad, where the small-angle model holds; "
                                  f"got {float(cp.detach()[:, 3:].abs().max()):.3g} rad")
@@ -330,7 +328,7 @@ class BlurOperator:
         if block_elements is None:
             block_elements = DEFAULT_BLOCK_ELEMENTS.get(self.device.type, DEFAULT_BLOCK_ELEMENTS["cpu"])
         self.block_elements = int(block_elements)
-        self.positions = bezier_positions(cp, self.n_times)
+        self.positions = bezier_positions(cp, self.n_times)  # refuses NaN or Inf in a tensor
         V, U = self.shape[:2]
         #: angular shifts s_u (T, X) and s_v (T, Y) of every instant
         self.s_u, self.s_v = angular_shifts(self.positions, self.shape, self.frame)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._lightfield import white_level
+from .._lightfield import restore_warnings, warnings_state, white_level
 
 __all__ = ["PATH_KINDS", "item_seed", "draw_path", "simulate_item", "run_item", "item_metadata"]
 
@@ -287,7 +287,7 @@ def _item_scope():
 
     with _SCOPE["lock"]:
         if _SCOPE["depth"] == 0:
-            _SCOPE["saved"] = (warnings.showwarning, list(warnings.filters), torch.get_num_threads())
+            _SCOPE["saved"] = (warnings_state(), torch.get_num_threads())
             warnings.showwarning = _to_the_item
             warnings.simplefilter("always")
         _SCOPE["depth"] += 1
@@ -300,17 +300,15 @@ def _item_scope():
         with _SCOPE["lock"]:
             _SCOPE["depth"] -= 1
             if _SCOPE["depth"] == 0:
-                show, filters, n_threads = _SCOPE["saved"]
-                warnings.showwarning = show
-                warnings.filters[:] = filters
-                getattr(warnings, "_filters_mutated", lambda: None)()  # as catch_warnings does: "once" forgets
+                state, n_threads = _SCOPE["saved"]
+                restore_warnings(state)
                 torch.set_num_threads(n_threads)
 
 
 def _to_the_item(message, category, filename, lineno, file=None, line=None):
     caught = getattr(_THREAD, "caught", None)
     if caught is None:  # a thread that runs no item
-        _SCOPE["saved"][0](message, category, filename, lineno, file, line)
+        _SCOPE["saved"][0][0](message, category, filename, lineno, file, line)  # the showwarning it found
     else:
         caught.append(f"{category.__name__}: {message}")
 

@@ -401,7 +401,7 @@ class PathSource(Container):
             "(after it changed, or after the table was edited) does not"))
         self.take_button.changed.connect(self.take_path)
         self.json_file.changed.connect(self.load_json)
-        self.load_button.changed.connect(self.reload_json)
+        self.load_button.changed.connect(lambda *_: self.load_json(say_why=True))
         super().__init__(name="path_source",
                          widgets=[self.path_layer, self.take_button, self.json_file, self.load_button])
         self.margins = (0, 0, 0, 0)
@@ -425,18 +425,13 @@ class PathSource(Container):
         """Hand on the path of the layer chosen in *take path from*."""
         self.take_from(self.path_layer.value)
 
-    def reload_json(self, *_):
-        """*Load path file*: hand on the path of the chosen JSON file again (a notification when none is)."""
+    def load_json(self, *_, say_why: bool = False):
+        """Hand on the path of the chosen JSON file (``say_why``: a notification when none is chosen, as for
+        *Load path file*; a file being chosen or typed is read once it ends in .json)."""
         name = self.json_file.value
         if not name or not str(name).lower().endswith(".json"):
-            notify_error(f"{self._title}: choose a path JSON file (.json) first")
-            return
-        self.load_json()
-
-    def load_json(self, *_):
-        """Hand on the path of the chosen JSON file."""
-        name = self.json_file.value
-        if not name or not str(name).lower().endswith(".json"):
+            if say_why:
+                notify_error(f"{self._title}: choose a path JSON file (.json) first")
             return
         try:
             cp, fields = read_path_json(name)

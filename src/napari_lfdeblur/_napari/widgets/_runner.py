@@ -21,12 +21,12 @@ import logging
 import threading
 import time
 import traceback
-import warnings
 
 import numpy as np
 from magicgui.widgets import Container, Label, ProgressBar, PushButton
 from napari.qt.threading import thread_worker
 
+from ..._lightfield import restore_warnings, warnings_state
 from ...progress import Cancelled, with_previews
 from .._torch_thread import iterate
 from ..layers import LayerError, add_layer, lightfield_from_layer
@@ -49,15 +49,14 @@ _WARNINGS = {"runs": 0, "saved": None}
 
 def _run_starts() -> None:
     if _WARNINGS["runs"] == 0:
-        _WARNINGS["saved"] = (warnings.showwarning, list(warnings.filters))
+        _WARNINGS["saved"] = warnings_state()
     _WARNINGS["runs"] += 1
 
 
 def _run_ends() -> None:
     _WARNINGS["runs"] = max(0, _WARNINGS["runs"] - 1)
     if _WARNINGS["runs"] == 0 and _WARNINGS["saved"] is not None:
-        warnings.showwarning, warnings.filters[:] = _WARNINGS["saved"][0], _WARNINGS["saved"][1]
-        getattr(warnings, "_filters_mutated", lambda: None)()  # as catch_warnings does: "once" forgets
+        restore_warnings(_WARNINGS["saved"])
         _WARNINGS["saved"] = None
 
 
