@@ -161,6 +161,9 @@ def test_views_gray16_zero_based(tmp_path, lf_gray):
     out = read_lightfield(folder)
     assert out.shape == (V, U, Y, X)
     np.testing.assert_allclose(out, lf16 / 65535, atol=1e-7)
+    # index_base=1 on names that start at 0: the views of index 0 are refused, not dropped
+    with pytest.raises(LightFieldFormatError, match="below the index base; pass index_base=0"):
+        read_lightfield(folder, index_base=1)
 
 
 def test_views_tiff16(tmp_path, lf_rgb):
@@ -200,6 +203,16 @@ def test_views_hci(tmp_path, lf_rgb):
     assert cam["meta"]["disp_min"] == -1.5 and cam["meta"]["scene"] == "boxes"
 
 
+def test_views_hci_non_square_grid(tmp_path, lf_rgb):
+    # docs/io.md: input_CamNNN views are row-major; grid=(V, U) for a grid that is not square
+    lf8 = _u8(lf_rgb[:2, :3])
+    folder = tmp_path / "wide"
+    folder.mkdir()
+    for k in range(6):
+        iio.imwrite(folder / f"input_Cam{k:03d}.png", lf8[k // 3, k % 3])
+    np.testing.assert_array_equal(read_lightfield(folder, grid=(2, 3)), lf8 / np.float32(255))
+
+
 def test_views_stanford(tmp_path, lf_rgb):
     lf8 = _u8(lf_rgb)
     folder = _write_views(
@@ -217,6 +230,9 @@ def test_views_pattern_option(tmp_path, lf_gray):
     with pytest.raises(LightFieldFormatError):
         read_lightfield(folder)  # no recognised naming scheme
     out = read_lightfield(folder, layout="views", pattern=r"r(?P<row>\d+)c(?P<col>\d+)")
+    np.testing.assert_array_equal(out, lf8 / np.float32(255))
+    # unnamed groups: the first is the row, the second the column (3 x 4 views, so a swap cannot pass)
+    out = read_lightfield(folder, layout="views", pattern=r"r(\d+)c(\d+)")
     np.testing.assert_array_equal(out, lf8 / np.float32(255))
 
 
@@ -285,6 +301,12 @@ def test_mat_v5_drops_weight(tmp_path, lf_rgb):
     assert out.shape == (V, U, Y, X, 3)
     np.testing.assert_allclose(out, lf16 / 65535, atol=1e-7)
     assert meta["camera"]["LensletGridModel"]["HSpacing"] == pytest.approx(14.2)
+    # a gray light field with its weight: the gray channel is kept, the weight (last) dropped
+    gray16 = lf16[..., 1]
+    scipy.io.savemat(tmp_path / "gray.mat", {"LF": np.stack([gray16, np.full_like(gray16, 65535)], axis=-1)})
+    out, meta = read_lightfield_with_metadata(tmp_path / "gray.mat")
+    assert meta["dropped_weight_channel"] and out.shape == (V, U, Y, X)
+    np.testing.assert_allclose(out, gray16 / 65535, atol=1e-7)
 
 
 def test_mat_v73_axes_reversed(tmp_path, lf_rgb):
@@ -333,6 +355,9 @@ def test_npy_npz_tiff_arrays(tmp_path, lf_rgb, lf_gray):
     np.testing.assert_allclose(read_lightfield(tmp_path / "d.tif"), _u16(lf_gray) / 65535, atol=1e-7)
     np.save(tmp_path / "e.npy", lf_rgb * 255)
     np.testing.assert_allclose(read_lightfield(tmp_path / "e.npy", value_range=(0, 255)), lf_rgb, atol=1e-6)
+    # docs/io.md: an .npz's light field is the array `lf`, also beside another 4D array
+    np.savez(tmp_path / "f.npz", blurred=lf_gray * 0.5, lf=lf_gray)
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "f.npz"), lf_gray)
 
 
 def test_detect_and_probe(tmp_path, lf_gray):
@@ -347,6 +372,11 @@ def test_detect_and_probe(tmp_path, lf_gray):
     assert probe_layout(tmp_path / "notes.txt") is None
     assert probe_layout(tmp_path / "missing.npz") is None
     assert probe_layout(tmp_path) is None  # a folder with no views
+    with h5py.File(tmp_path / "cube.h5", "w") as f:
+        f["LF"] = lf_gray[0]  # 3D: an image stack, not a light field
+    assert probe_layout(tmp_path / "cube.h5") is None
+    scipy.io.savemat(tmp_path / "img.mat", {"LF": lf_gray[0, 0]})  # 2D
+    assert probe_layout(tmp_path / "img.mat") is None
 
 
 # ------------------------------------------------------------------ writers
@@ -851,6 +881,15 @@ def test_mat_float_overshoot_is_clipped(tmp_path, lf_gray):
     with pytest.raises(LightFieldFormatError, match="outside \\[0, 1\\]"):
         read_lightfield(tmp_path / "g.mat")
     np.testing.assert_allclose(read_lightfield(tmp_path / "g.mat", value_range=(0, 255)), lf_gray, atol=1e-6)
+    # docs/io.md: float data within [-0.5, 1.5] is clipped to [0, 1]; beyond that it needs value_range
+    wide = lf_gray * 1.9 - 0.45  # within [-0.45, 1.45]
+    scipy.io.savemat(tmp_path / "h.mat", {"LF": wide})
+    np.testing.assert_allclose(read_lightfield(tmp_path / "h.mat"), np.clip(wide, 0, 1), atol=1e-7)
+    assert wide.max() > 1.4 and wide.min() < -0.4
+    for name, beyond in (("over.mat", lf_gray + 0.6), ("under.mat", lf_gray - 0.6)):  # up to 1.6, down to -0.6
+        scipy.io.savemat(tmp_path / name, {"LF": beyond})
+        with pytest.raises(LightFieldFormatError, match="outside \\[0, 1\\]"):
+            read_lightfield(tmp_path / name)
 
 
 def test_png16_decoder_mixed_row_filters_matches_reference(tmp_path):
@@ -988,6 +1027,14 @@ def test_bad_angular_crop_is_refused_before_reading(tmp_path, lf_gray, crop):
     np.save(tmp_path / "a.npy", lf_gray)
     with pytest.raises(ValueError, match="angular_crop"):
         read_lightfield(tmp_path / "a.npy", angular_crop=crop)
+
+
+def test_angular_crop_bounds_each_axis_by_its_own_number_of_views(tmp_path, lf_gray):
+    np.save(tmp_path / "wide.npy", lf_gray)  # 3 x 4 views: all 4 columns of the central row can be kept
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "wide.npy", angular_crop=(1, 4)), lf_gray[1:2])
+    np.save(tmp_path / "tall.npy", lf_gray.swapaxes(0, 1))  # 4 x 3 views: 4 columns cannot
+    with pytest.raises(ValueError, match="angular_crop=\\(1, 4\\) must be .* 1 <= n_u <= 3"):
+        read_lightfield(tmp_path / "tall.npy", angular_crop=(1, 4))
 
 
 @pytest.mark.parametrize("text, expected", [("", None), (None, None), ("auto", "auto"), (" AUTO ", "auto"),
@@ -1131,6 +1178,36 @@ def test_writing_values_outside_0_1_warns_how_to_read_them_back(tmp_path, lf_gra
         write_lightfield(tmp_path / "o.png", lf, layout="mosaic")
 
 
+def test_integer_samples_clip_values_outside_0_1_instead_of_wrapping(tmp_path):
+    # docs/io.md: bit_depth=8 or 16 quantises to unsigned integers, clipping to [0, 1]
+    lf = np.full((2, 2, 3, 4), 1.2, np.float32)
+    lf[1, 0] = -0.2
+    for name, kwargs in (("views", {}), ("m.png", {"layout": "mosaic"}), ("d.tif", {"bit_depth": 16})):
+        with pytest.warns(UserWarning, match="-bit samples clip them to"):
+            written = write_lightfield(tmp_path / name, lf, **kwargs)
+        np.testing.assert_array_equal(read_lightfield(written), np.clip(lf, 0, 1), err_msg=name)
+
+
+def test_float_overshoots_beyond_rounding_and_negative_integers_are_refused(tmp_path):
+    # to_float01's docstring: float overshoots of up to 1e-3 (rounding) are clipped, larger ones refused
+    for value, expected in ((1.0005, 1.0), (-0.0005, 0.0), (1.05, None), (-0.05, None)):
+        np.save(tmp_path / "f.npy", np.full((2, 2, 4, 4), value, np.float32))
+        if expected is None:
+            with pytest.raises(LightFieldFormatError, match="outside \\[0, 1\\]; to rescale, pass value_range"):
+                read_lightfield(tmp_path / "f.npy")
+        else:
+            np.testing.assert_array_equal(read_lightfield(tmp_path / "f.npy"), expected)
+    # signed integers are divided by their maximum; a negative one has no place in [0, 1]: refused
+    ints = np.zeros((2, 2, 4, 4), np.int16)
+    ints[1, 1, 1, 1] = 32767
+    np.save(tmp_path / "i.npy", ints)
+    assert read_lightfield(tmp_path / "i.npy")[1, 1, 1, 1] == 1.0
+    ints[0, 0, 0, 0] = -5
+    np.save(tmp_path / "i.npy", ints)
+    with pytest.raises(LightFieldFormatError, match="signed integer data has negative values; pass value_range"):
+        read_lightfield(tmp_path / "i.npy")
+
+
 def test_float64_beyond_float32_and_timedelta_data(tmp_path):
     np.save(tmp_path / "big.npy", np.full((2, 2, 8, 8), 1e300))  # finite in float64, inf in float32
     with pytest.raises(LightFieldFormatError, match=r"float values span \[1e\+300, 1e\+300\], outside"):
@@ -1152,7 +1229,10 @@ def test_a_truncated_tiff_is_a_read_error(tmp_path, lf_gray, capsys):
 def test_an_opaque_alpha_channel_is_dropped_from_views_as_from_mosaics(tmp_path, lf_rgb):
     rgb8 = _u8(lf_rgb)
     rgba = np.concatenate([rgb8, np.full(rgb8.shape[:-1] + (1,), 255, np.uint8)], axis=-1)
-    for name, data in (("opaque", rgba), ("translucent", np.where(np.arange(4) == 3, rgba // 2, rgba))):
+    holed = rgba.copy()
+    holed[:, :, 0, 0, 3] = 0  # opaque but for one pixel a view: the channel is not opaque everywhere
+    for name, data in (("opaque", rgba), ("translucent", np.where(np.arange(4) == 3, rgba // 2, rgba)),
+                       ("holed", holed)):
         folder = tmp_path / name
         folder.mkdir()
         for v in range(rgba.shape[0]):
@@ -1163,6 +1243,7 @@ def test_an_opaque_alpha_channel_is_dropped_from_views_as_from_mosaics(tmp_path,
             np.testing.assert_array_equal(back, read_lightfield(write_lightfield(tmp_path / "rgb", lf_rgb)))
         else:  # transparency is data: kept
             assert back.shape[-1] == 4
+            np.testing.assert_array_equal(back, data / np.float32(255))
 
 
 @pytest.mark.parametrize("suffix", [".h5", ".mat"])

@@ -26,6 +26,7 @@ def lf_rgb():
 
 
 def test_get_reader_claims_only_light_fields(tmp_path, lf_rgb):
+    import h5py
     import imageio.v3 as iio
 
     from napari_lfdeblur._napari.reader import napari_get_reader
@@ -35,9 +36,11 @@ def test_get_reader_claims_only_light_fields(tmp_path, lf_rgb):
     np.save(tmp_path / "image.npy", lf_rgb[0, 0])
     iio.imwrite(tmp_path / "photo.png", (lf_rgb[0, 0] * 255).astype(np.uint8))
     (tmp_path / "broken.h5").write_bytes(b"\x89HDF\r\n\x1a\n garbage")
+    with h5py.File(tmp_path / "stack.h5", "w") as f:
+        f["LF"] = lf_rgb[0, 0]  # a dataset named LF that is 3D: not a light field, left to other readers
     assert callable(napari_get_reader(str(tmp_path / "views")))
     assert callable(napari_get_reader([str(tmp_path / "lf.npz")]))
-    for p in ["image.npy", "photo.png", "broken.h5", "nope.npz", "empty_dir"]:
+    for p in ["image.npy", "photo.png", "broken.h5", "stack.h5", "nope.npz", "empty_dir"]:
         assert napari_get_reader(str(tmp_path / p)) is None, p
     assert napari_get_reader([str(tmp_path / "lf.npz"), str(tmp_path / "views")]) is None
     assert napari_get_reader(None) is None
@@ -102,6 +105,21 @@ def test_reader_opens_the_camera_path_a_file_holds(tmp_path, lf_rgb):
     pos = bezier_positions(cp, 9)
     expected = np.stack([(Y - 1) / 2 + 0.75 * pos[:, 1], (X - 1) / 2 + 0.75 * pos[:, 0]], axis=1)
     np.testing.assert_allclose(line, expected, atol=1e-9)
+
+
+def test_reader_draws_a_path_without_n_times_at_32_instants(tmp_path, lf_rgb):
+    from napari_lfdeblur._napari.reader import read_lightfield_layer
+    from napari_lfdeblur.path import bezier_positions
+
+    cp = np.array([[-1.0, 0.5, 0.2], [0.0, -0.5, 0.0], [1.0, 0.0, -0.2]])
+    write_lightfield(tmp_path / "out.npz", lf_rgb, control_points=cp)  # no n_times stated
+    _, (shapes, path_kw, _) = read_lightfield_layer(tmp_path / "out.npz")
+    # read_lightfield_layer's docstring: the path is sampled at the file's n_times, else 32; drawn as in
+    # test_reader_opens_the_camera_path_a_file_holds (0.75 px a view about the centre of the 6 x 7 views)
+    assert path_kw["metadata"]["n_times"] == 32
+    (line,) = [s for s, k in zip(shapes, path_kw["features"]["kind"]) if k == "path"]
+    pos = bezier_positions(cp, 32)
+    np.testing.assert_allclose(line, np.stack([2.5 + 0.75 * pos[:, 1], 3.0 + 0.75 * pos[:, 0]], axis=1), atol=1e-9)
 
 
 def test_reader_path_layer_keeps_the_views_its_file_states(tmp_path, lf_rgb):
