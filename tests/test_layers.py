@@ -7,7 +7,7 @@ import pytest
 
 pytest.importorskip("napari")
 
-from napari.layers import Image, Layer  # noqa: E402
+from napari.layers import Image, Layer, Shapes  # noqa: E402
 
 import napari_lfdeblur  # noqa: E402
 from napari_lfdeblur._napari.layers import (  # noqa: E402
@@ -19,6 +19,7 @@ from napari_lfdeblur._napari.layers import (  # noqa: E402
     lightfield_metadata,
     path_layer_data,
     path_scale,
+    windows_from_shapes,
 )
 from napari_lfdeblur.path import bezier_positions  # noqa: E402
 
@@ -35,6 +36,9 @@ def test_lightfield_layer_grey_and_colour():
     # a single channel is squeezed to 4D
     data, kw, _ = lightfield_layer_data(grey[..., None], name="s")
     assert data.shape == grey.shape and not kw["rgb"]
+    # a grey result is shown on 0..1, the scale of its input, not stretched to its own range
+    mid = 0.25 + 0.5 * np.random.default_rng(0).random(grey.shape).astype(np.float32)
+    assert tuple(Layer.create(*lightfield_layer_data(mid, name="m")).contrast_limits) == (0.0, 1.0)
 
 
 def test_metadata_holds_version_parameters_and_path():
@@ -53,8 +57,8 @@ def test_lightfield_from_layer_copies_and_scales_integers():
     f = np.random.default_rng(0).random((2, 2, 3, 3)).astype(np.float32)
     layer = Image(f)
     lf = lightfield_from_layer(layer)
-    lf[...] = 0
-    assert np.all(layer.data == f)  # a copy: the layer is untouched
+    np.testing.assert_array_equal(lf, f)
+    assert not np.shares_memory(lf, layer.data)  # a copy: writing into it leaves the layer untouched
 
 
 @pytest.mark.parametrize(
@@ -89,13 +93,29 @@ def test_epi_layer_data():
     data, kw, _ = epi_layer_data(lf, "h", name="h", v=1, y=4)
     np.testing.assert_array_equal(data, lf[1, :, 4, :])
     assert kw["rgb"] and kw["translate"][0] > 12
+    assert (kw["metadata"]["v"], kw["metadata"]["y"]) == (1, 4)  # the pick it shows
     data, kw, _ = epi_layer_data(lf, "v", name="v", u=2, x=9)
     np.testing.assert_array_equal(data, np.swapaxes(lf[:, 2, :, 9], 0, 1))
     assert kw["translate"][1] > 16
+    assert (kw["metadata"]["u"], kw["metadata"]["x"]) == (2, 9)
     with pytest.raises(ValueError):
         epi_layer_data(lf, "q", name="q")
     with pytest.raises(ValueError):
         epi_layer_data(lf, "h", name="h", v=9)
+
+
+def test_windows_from_shapes_are_the_pixels_covered_both_ends_included():
+    lf = np.zeros((5, 5, 16, 16), np.float32)
+
+    def rectangle(y0, x0, y1, x1):
+        return Shapes([np.array([[y0, x0], [y0, x1], [y1, x1], [y1, x0]], float)], shape_type="rectangle")
+
+    # corners on the first and the last pixel centres: the whole 16 x 16 view
+    assert windows_from_shapes(rectangle(0, 0, 15, 15), Image(lf)) == [(0, 0, 16, 16)]
+    # a layer placed in the world (2 units a pixel, its first row at y = 10): world rows 14..20, columns 6..12
+    # are pixel rows (14 - 10) / 2 .. (20 - 10) / 2 = 2..5 and columns 6 / 2 .. 12 / 2 = 3..6
+    placed = Image(lf, scale=(1, 1, 2, 2), translate=(0, 0, 10, 0))
+    assert windows_from_shapes(rectangle(14, 6, 20, 12), placed) == [(2, 3, 4, 4)]
 
 
 def test_no_path_in_metadata():
@@ -120,6 +140,10 @@ def test_6_column_path_layer_draws_the_translation_and_keeps_the_rotation(tmp_pa
     np.testing.assert_array_equal(control_points_from_layer(layer), cp)
     assert layer.metadata["motion"] == "6dof" and 0 < layer.metadata["max_rotation_rad"] <= 0.01
     assert "rotation" in layer.metadata["frame"]
+    # the largest |r| over all three axes: a constant r_x alone is the path's largest rotation
+    tilt = np.zeros((2, 6))
+    tilt[:, 3] = 0.01
+    assert path_layer_data(tilt, shape, n_times=4)[1]["metadata"]["max_rotation_rad"] == pytest.approx(0.01)
     # a light field's metadata keeps the 6 columns, through the writer and the reader too
     meta = lightfield_metadata(kind="blurred", control_points=cp, n_times=9)
     lf = Image(np.zeros((2, 2, 4, 4), np.float32), metadata=meta)
