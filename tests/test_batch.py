@@ -73,6 +73,7 @@ def test_simulate_equals_the_serial_api_bit_for_bit(client, inputs, tmp_path):
     report = simulate_dataset(inputs, tmp_path, n_per_input=2, path_kind="shake", extent=(1.0, 3.0),
                               infinity_disparity=0.5, noise=0.02, seed=7, client=client, device="cpu")
     assert report.n_ok == 6 and report.n_failed == 0
+    drawn = []
     for p in inputs:
         lf = read_lightfield(p)
         for k in range(2):
@@ -81,6 +82,9 @@ def test_simulate_equals_the_serial_api_bit_for_bit(client, inputs, tmp_path):
                                                      infinity_disparity=0.5, noise=0.02, seed=7))
             assert np.array_equal(read_lightfield(out), want)
             np.testing.assert_array_equal(load_path_json(tmp_path / f"{p.stem}_{k:04d}.path.json"), cp)
+            drawn.append(cp)
+    # each item has a path of its own: the items of one input differ, and so do item k of different inputs
+    assert all(not np.array_equal(a, b) for i, a in enumerate(drawn) for b in drawn[i + 1:])
     # without noise an item is simulate_blur by its path, exactly
     simulate_dataset(inputs[:1], tmp_path / "clean", seed=3, path_kind="linear", client=client, device="cpu")
     cp = load_path_json(tmp_path / "clean" / "scene0_0000.path.json")
@@ -90,6 +94,23 @@ def test_simulate_equals_the_serial_api_bit_for_bit(client, inputs, tmp_path):
     assert {"input", "output", "parameters", "seed", "item_seed", "version", "status", "time", "error",
             "size"} <= set(rec)
     assert "simulate_dataset" in (tmp_path / "README.md").read_text()
+
+
+def test_item_seed_is_a_seed_sequence_of_the_run_seed_a_hash_of_the_name_and_the_index():
+    import hashlib
+
+    # item_seed's docstring and docs/batch.md: numpy's SeedSequence of the run's seed, a SHA-256 hash of the input's
+    # name and the item's index, one 32-bit word of its state. Which word of the hash (its first 8 bytes, little-
+    # endian) is pinned here too, so that a later version makes a dataset again bit for bit
+    def documented(seed, name, index):
+        digest = int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:8], "little")
+        return int(np.random.SeedSequence([seed, digest, index]).generate_state(1, np.uint32)[0])
+
+    cases = [(0, "a.npz", 0), (0, "a.npz", 1), (0, "b.npz", 0), (7, "scene0.npz", 3), (2**40, "views", 12)]
+    for seed, name, index in cases:
+        assert item_seed(seed, name, index) == documented(seed, name, index), (seed, name, index)
+    # every item of every input is seeded apart
+    assert len({item_seed(0, name, k) for name in ("a.npz", "b.npz", "c.npz") for k in range(4)}) == 12
 
 
 def test_simulate_item_adds_gaussian_noise_of_the_stated_sigma_on_the_light_fields_scale():
@@ -117,6 +138,22 @@ def test_draw_path_draws_sizes_and_directions_from_the_stated_ranges():
     for kind in ("linear", "arc"):  # a fixed extent is the length of these, exactly
         pos = bezier_positions(draw_path(kind, 2.0, rng), 2)
         assert np.isclose(np.linalg.norm(pos[-1, :2] - pos[0, :2]), 2.0)
+    # shake, shake6 and random: control points in a box whose side is drawn from the range, so their spread in
+    # (p_x, p_y) never passes the range's maximum and often passes its minimum (a box of side 1 cannot)
+    for kind in ("shake", "shake6", "random"):
+        spreads = np.array([np.ptp(draw_path(kind, (1.0, 3.0), rng)[:, :2], axis=0).max() for _ in range(60)])
+        assert spreads.max() <= 3.0 and (spreads > 1.0).sum() >= 20, (kind, spreads.max(), (spreads > 1.0).sum())
+    # arc: bowed by bend * length with the bend uniform in [-0.5, 0.5] (draw_path's docstring), to either side;
+    # arc_path puts its middle control point 2 * bend * length across the chord from the chord's middle (a
+    # quadratic Bezier reaches half way to it)
+    bends = []
+    for _ in range(60):
+        cp = draw_path("arc", (1.0, 3.0), rng)[:, :2]
+        chord, offset = cp[2] - cp[0], cp[1] - (cp[0] + cp[2]) / 2
+        length = np.linalg.norm(chord)
+        bends.append((chord[0] * offset[1] - chord[1] * offset[0]) / length / (2 * length))  # signed
+    bends = np.array(bends)
+    assert np.abs(bends).max() <= 0.5 and 15 <= (bends < 0).sum() <= 45, (bends.min(), bends.max())
 
 
 def test_deblur_equals_the_serial_api_bit_for_bit(client, tmp_path):
@@ -175,6 +212,12 @@ def test_deblur_takes_each_inputs_stated_infinity_disparity(client, tmp_path):
     assert np.array_equal(read_lightfield(tmp_path / "out" / "half.npz"), want.lightfield)
     rec = read_manifest(tmp_path / "out")["odd.npz"]
     assert rec["status"] == "failed" and "odd.npz states infinity_disparity = 'far'" in rec["error"]
+    # so does `lfdeblur batch deblur` without --infinity-disparity (its help: default each input's own)
+    (tmp_path / "tiny.json").write_text(TINY.to_json())
+    assert main(["batch", "deblur", str(tmp_path / "in" / "half.npz"), str(tmp_path / "cli"), "--params",
+                 str(tmp_path / "tiny.json"), "--scheduler", client.scheduler.address, "--device", "cpu"]) == 0
+    assert json.loads((tmp_path / "cli" / "half.path.json").read_text())["infinity_disparity"] == 0.5
+    assert np.array_equal(read_lightfield(tmp_path / "cli" / "half.npz"), want.lightfield)
     # given, it is every item's
     deblur_many(tmp_path / "in" / "half.npz", tmp_path / "given", params=TINY, infinity_disparity=0.0,
                 client=client, device="cpu")
@@ -200,6 +243,10 @@ def test_bad_items_are_recorded_and_the_others_complete(client, inputs, tmp_path
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert "2 of 2 items failed" in err and "corrupt.npz" in err and "dashboard" in err
+    # some items failed and others are done: exit status 1 as well (docs/batch.md: 1 when some failed)
+    write_lightfield(bad / "good.npz", read_lightfield(inputs[0]))
+    assert main(argv) == 1
+    assert "2 of 3 items failed (1 done, 0 already done" in capsys.readouterr().err
     assert main(["batch", "simulate", str(tmp_path / "none*.npz"), str(tmp_path / "cli")]) == 2
 
 
@@ -288,6 +335,37 @@ def test_cli_batch_deblur_with_params(client, tmp_path, capsys):
     assert rec["restoration"] == ("full" if rec["blur_found"] else "none")
     assert "lfdeblur batch deblur" in (tmp_path / "out" / "README.md").read_text()
     assert main(argv) == 0 and "1 already done" in capsys.readouterr().out
+
+
+def test_cli_batch_simulate_draws_the_extent_from_a_min_max_range(client, inputs, tmp_path):
+    out = tmp_path / "out"
+    # docs/batch.md's own example: --extent 0.5:3, a length drawn from [0.5, 3] for linear paths
+    assert main(["batch", "simulate", str(inputs[0]), str(out), "--path-kind", "linear", "--extent", "0.5:3",
+                 "--n-per-input", "6", "--n-times", "4", "--scheduler", client.scheduler.address,
+                 "--device", "cpu"]) == 0
+    last = read_manifest(out)
+    assert len(last) == 6 and all(rec["parameters"]["extent"] == [0.5, 3.0] for rec in last.values())
+    for k in range(6):
+        cp = load_path_json(out / f"scene0_{k:04d}.path.json")
+        assert 0.5 <= np.linalg.norm(cp[-1, :2] - cp[0, :2]) <= 3.0
+
+
+def test_the_dataset_cards_command_makes_the_same_dataset_again(client, inputs, tmp_path):
+    import shlex
+
+    first, again = tmp_path / "first", tmp_path / "again"
+    where = ["--scheduler", client.scheduler.address, "--device", "cpu"]  # not data options: not in the card
+    assert main(["batch", "simulate", str(inputs[0]), str(first), "--n-per-input", "2", "--path-kind", "shake",
+                 "--extent", "0.5:2", "--noise", "0.01", "--n-times", "4", "--seed", "3", *where]) == 0
+    card = (first / "README.md").read_text()
+    command = shlex.split(card.split("```bash\n")[1].split("\n```")[0])
+    assert command[:3] == ["lfdeblur", "batch", "simulate"] and str(first) in command
+    # the card's command, into another folder, makes the same items bit for bit
+    assert main([str(again) if word == str(first) else word for word in command[1:]] + where) == 0
+    names = sorted(p.name for p in first.glob("*.npz"))
+    assert names == ["scene0_0000.npz", "scene0_0001.npz"] and sorted(p.name for p in again.glob("*.npz")) == names
+    for name in names:
+        assert np.array_equal(read_lightfield(again / name), read_lightfield(first / name)), name
 
 
 def test_value_range_reads_the_inputs_and_is_part_of_the_items_parameters(client, tmp_path, capsys):
@@ -493,11 +571,18 @@ def test_outputs_state_their_blur_and_other_files_are_never_replaced(client, inp
     out.mkdir()
     (out / "scene0_0000.path.json").write_text('{"my": "precious path"}')  # a file of the user's, of an item's name
     np.savez(out / "scene1_0000.npz", weights=np.ones(3))  # not a light field
+    users = {name: (out / name).read_bytes() for name in ("scene0_0000.path.json", "scene1_0000.npz")}
     report = simulate_dataset(inputs, out, infinity_disparity=1.0, n_times=8, client=client, device="cpu")
     assert (report.n_ok, report.n_failed) == (1, 2)
     assert all("is not this item's" in r["error"] and "--overwrite" in r["error"] for r in report.failed)
     assert (out / "scene0_0000.path.json").read_text() == '{"my": "precious path"}'
     assert list(np.load(out / "scene1_0000.npz")) == ["weights"]
+    # the same call again (what the command's failure message says to do): a failed record is not an output of
+    # this item, so the user's files are refused again and left as they are
+    again = simulate_dataset(inputs, out, infinity_disparity=1.0, n_times=8, client=client, device="cpu")
+    assert (again.n_ok, again.n_skipped, again.n_failed) == (0, 1, 2)
+    assert all("is not this item's" in r["error"] for r in again.failed)
+    assert {name: (out / name).read_bytes() for name in users} == users
     # the output says what it was blurred with, so that deblurring it takes its infinity disparity
     meta = read_lightfield_with_metadata(out / "scene2_0000.npz")[1]
     assert (meta["infinity_disparity"], meta["n_times"]) == (1.0, 8)

@@ -506,11 +506,17 @@ def test_deblur_help_describes_motion(capsys):
     assert "--motion {3dof,6dof}" in text and "slower" in text and "rotation" in text
 
 
-@pytest.mark.parametrize("option, value, received, bad, message", [
-    ("--light-restoration", "0.25", [0.5, 0.25], ("1.5", "-0.1", "half"), "expected a number in [0, 1]"),
-    ("--max-memory", "1.5", [None, 3 * 2**29], ("0", "-2", "lots", "inf"), "expected a positive number of GiB"),
+@pytest.mark.parametrize("option, values, received, bad, message", [
+    # the help: a FRACTION in [0, 1], both ends taken (the preset 'default' has 0.5)
+    pytest.param("--light-restoration", ["0.25", "0", "1"], [0.5, 0.25, 0.0, 1.0], ("1.5", "-0.1", "half"),
+                 "expected a number in [0, 1]", id="light-restoration"),
+    pytest.param("--max-memory", ["1.5"], [None, 3 * 2**29], ("0", "-2", "lots", "inf"),
+                 "expected a positive number of GiB", id="max-memory"),
+    pytest.param("--seed", ["5"], [0, 5], ("-1", "x"), "expected a whole number from 0 to 2**63 - 1", id="seed"),
+    # a flag: BlindParams.require_evidence=False, as its help says (the presets require evidence)
+    pytest.param("--restore-anyway", [None], [True, False], (), None, id="restore-anyway"),
 ])
-def test_deblur_options_reach_the_solver_and_are_checked(option, value, received, bad, message, lf_file, tmp_path,
+def test_deblur_options_reach_the_solver_and_are_checked(option, values, received, bad, message, lf_file, tmp_path,
                                                          monkeypatch, capsys):
     from napari_lfdeblur import blind
     from napari_lfdeblur.progress import Progress
@@ -520,20 +526,62 @@ def test_deblur_options_reach_the_solver_and_are_checked(option, value, received
 
     def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None,
                                check_view_order=True):
-        seen.append(params.light_restoration if option == "--light-restoration" else max_memory)
+        seen.append({"--light-restoration": params.light_restoration, "--max-memory": max_memory, "--seed": seed,
+                     "--restore-anyway": params.require_evidence}[option])
         yield Progress("path", 1, 1, loss=1.0)
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params)
 
     monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
     assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu"]) == 0
-    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--overwrite", option, value]) == 0
+    for value in values:
+        given = [option] if value is None else [option, value]
+        assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--overwrite", *given]) == 0
     assert seen == received
     capsys.readouterr()
     for text in bad:
         with pytest.raises(SystemExit):
             main(["deblur", str(src), str(tmp_path / "x.npz"), option, text])
         assert message in capsys.readouterr().err
-    assert len(seen) == 2 and not (tmp_path / "x.npz").exists()
+    assert len(seen) == 1 + len(values) and not (tmp_path / "x.npz").exists()
+
+
+def _spy_on_deconvolve(monkeypatch) -> list:
+    """The keyword arguments of each call of the solver the command runs (the real one, which still runs)."""
+    from napari_lfdeblur import deconvolution
+
+    real, seen = deconvolution.iter_deconvolve, []
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs)
+        return (yield from real(*args, **kwargs))
+
+    monkeypatch.setattr(deconvolution, "iter_deconvolve", spy)
+    return seen
+
+
+def test_deconvolve_tol_reaches_the_solver(lf_file, tmp_path, monkeypatch, capsys):
+    _, src = lf_file
+    save_path_json(tmp_path / "p.json", linear_path(1.0))
+    seen = _spy_on_deconvolve(monkeypatch)
+    assert main(["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "d.npz"), "--tol", "0",
+                 "--iterations", "3", "--device", "cpu"]) == 0
+    assert (seen[0]["tol"], seen[0]["n_iter"]) == (0.0, 3)
+    assert "3 iteration(s)" in capsys.readouterr().out  # tol 0: no early stop
+    saved = read_lightfield_with_metadata(tmp_path / "d.npz")[1]["saved_metadata"]["parameters"]
+    assert saved["tol"] == 0.0  # the file states the tolerance it was restored with
+
+
+def test_deconvolve_takes_t_from_the_path_file_else_32(lf_file, tmp_path, monkeypatch):
+    lf, _ = lf_file
+    write_lightfield(tmp_path / "b.npz", lf, metadata={"n_times": 8})  # the input states a T, its path file none
+    save_path_json(tmp_path / "p.json", linear_path(1.0))
+    save_path_json(tmp_path / "q.json", linear_path(1.0), n_times=6)
+    seen = _spy_on_deconvolve(monkeypatch)
+    for path_file, out in (("p.json", "d.npz"), ("q.json", "e.npz")):
+        assert main(["deconvolve", str(tmp_path / "b.npz"), str(tmp_path / path_file), str(tmp_path / out),
+                     "--iterations", "2", "--device", "cpu"]) == 0
+    # --n-times' help: "default: those stated with the path, else 32" (not the input's)
+    assert [kwargs["n_times"] for kwargs in seen] == [32, 6]
 
 
 def test_a_closed_stdout_ends_the_command_quietly(lf_file):
