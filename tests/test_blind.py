@@ -1028,6 +1028,22 @@ def test_short_memory_runs_in_overlapping_tiles(monkeypatch):
     assert np.abs(res.lightfield - ref).max() < 2e-3
 
 
+@pytest.mark.parametrize("d_inf", [2.0, -2.0])
+def test_tiles_at_a_nonzero_infinity_disparity_meet_without_seams(d_inf):
+    # d_inf moves the blur's samples across pixels: the tiles' overlap must grow with it, or their edges show
+    # (the final stage in 24-px tiles of 72x72 views against one full-frame solve with the same path and weight)
+    cp = np.array([[-1.0, 0.4, 0.0], [1.0, -0.4, 0.0]])
+    sharp = _scene((5, 5, 72, 72), seed=6, disparities=(2.0 + d_inf, -1.5 + d_inf))
+    blurred = simulate_blur(sharp, cp, n_times=8, infinity_disparity=d_inf)
+    p = BlindParams().replace(final={"n_iter": 100, "tol": 0.0, "weight": 0.004}, final_n_times=8)
+    ref = deconvolve(blurred, cp, n_times=8, infinity_disparity=d_inf, params=p.final, device="cpu")
+    info = {}
+    out = run_to_completion(blind._iter_final(blurred, cp, d_inf, p, torch.device("cpu"), (24, 24), 1, info))
+    assert info["final_weight"] == 0.004
+    # what the tiles leave is below what 24-px tiles leave at d_inf = 0 with this path (1.2e-3) times 5
+    assert np.abs(out - ref).max() < 6e-3
+
+
 def test_max_memory_bounds_the_run_by_tiles_and_is_checked(monkeypatch):
     sharp = _scene((5, 5, 160, 160), seed=6)
     blurred = simulate_blur(sharp, np.array([[-0.6, 0.2, 0.0], [0.5, -0.3, 0.0]]), n_times=16)

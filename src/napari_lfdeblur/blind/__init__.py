@@ -430,8 +430,10 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path, info):
         parts = [((slice(None), slice(None)), (slice(None), slice(None)))]
         out = None
     else:
+        # d_inf moves the samples up to r px: near a tile's edge the blur reads clamped pixels over a band of
+        # r px that the solve must explain, and its normal operator carries that band 2r px further in
         reach = float(np.abs(bezier_positions(cp, p.final_n_times)).sum(axis=1).max())  # |p_x| + |p_y| + |p_z|
-        parts = list(tiles(Y, X, tile, TILE_MARGIN + int(math.ceil(abs(d_inf) * reach))))
+        parts = list(tiles(Y, X, tile, TILE_MARGIN + 3 * int(math.ceil(abs(d_inf) * reach))))
         out = np.array(arr, dtype=np.float32)  # restored tile by tile; the rest shows as blurred meanwhile
     for i, (core, pad) in enumerate(parts):
         y0, x0 = pad[0].start or 0, pad[1].start or 0
