@@ -1342,3 +1342,164 @@ def test_joint_and_final_settings_are_checked_and_named():
         BlindParams().replace(final={"n_iter": 0})
     with pytest.raises(ValueError, match=r"^BlindParams\.final: n_iter must be >= 1"):
         BlindParams.from_dict({"final": {"n_iter": 0}})
+
+
+# ------------------------------------------------------------ parameters, gauge and the small helpers
+
+
+def test_a_curved_path_is_returned_in_the_zero_mean_gauge_of_n_times_not_of_final_n_times():
+    # BlindResult: the control points are in the zero-mean gauge for params.n_times; with 3 control points the
+    # gauges of 16 and of 3 instants differ, so the result must be centred for the 16
+    lf, _ = synthetic_scene((3, 3, 24, 24), seed=0)
+    b = simulate_blur(lf, np.array([[-0.8, 0.3, 0.0], [0.2, -0.6, 0.0], [0.7, 0.5, 0.0]]), n_times=32)
+    p = BlindParams().replace(n_control_points=3, n_times=16, final_n_times=3, require_evidence=False, final=None,
+                              path=dict(n_outer=1, steps=20, n_random=10, n_random_later=5, n_restarts=1,
+                                        estimate_z=False))
+    res = blind_deblur(b, params=p, device="cpu")
+    cp = res.control_points
+    assert cp.shape == (3, 3) and np.abs(cp[:, :2]).max() > 0.05  # a path, not the zero path
+    # the mean of the Bezier curve at t_k = k / 15, written out: B(t) = (1-t)^2 P0 + 2 t (1-t) P1 + t^2 P2
+    t = np.linspace(0, 1, 16)[:, None]
+    curve = (1 - t) ** 2 * cp[0] + 2 * t * (1 - t) * cp[1] + t**2 * cp[2]
+    np.testing.assert_allclose(curve.mean(0), 0, atol=1e-9)
+
+
+def test_path_fit_settings_refuse_a_region_below_min_size_and_no_windows():
+    # PathFitParams: region is 0 or at least min_size; n_regions at least 1
+    with pytest.raises(ValueError, match="region"):
+        PathFitParams(region=10)
+    assert PathFitParams(region=0).region == 0 and PathFitParams(region=24).region == 24
+    with pytest.raises(ValueError, match="n_regions"):
+        PathFitParams(n_regions=0)
+
+
+def test_the_default_path_box_is_a_fraction_of_the_smaller_aperture_side():
+    # docs/blind.md, "Gauge and range": max_extent 0 means 0.35 (min(V, U) - 1) views, at least 0.5
+    p = BlindParams()
+    assert p.path_box(7, 7) == pytest.approx(0.35 * 6)
+    assert p.path_box(5, 9) == pytest.approx(0.35 * 4)
+    assert p.path_box(2, 2) == 0.5
+    assert BlindParams(max_extent=1.25).path_box(7, 7) == 1.25
+
+
+def test_pyramid_factors_skip_levels_below_min_size_and_above_max_size():
+    # PathFitParams: n_levels levels, halving; levels smaller than min_size skipped; max_size the largest size
+    # (smaller side) used, finer levels skipped
+    def factors(Y, X, **path):
+        return _alternating.pyramid_factors(Y, X, BlindParams().replace(path=path))
+
+    assert factors(96, 96, n_levels=3, min_size=24) == [4, 2, 1]  # 24, 48, 96 px
+    assert factors(96, 96, n_levels=3, min_size=40) == [2, 1]  # 24 px is below min_size
+    assert factors(128, 128, max_size=32) == [4]  # 128 / 4 = 32 px
+    assert factors(128, 200, n_levels=2, max_size=64) == [4, 2]  # 32 and 64 px on the smaller side
+    assert factors(64, 64) == [1]
+
+
+def test_a_small_relative_gain_alone_keeps_the_blur_from_being_found(monkeypatch):
+    # _evidence: the blur is found only when E_none - E_blur > EVIDENCE_MARGIN sigma^2, the relative gain exceeds
+    # RELATIVE_MARGIN (6 %, docs/blind.md) and the reach is at least MIN_REACH; here only the relative gain fails
+    sigma = 0.01
+
+    def objectives(e_none, e_blur):
+        def fake(op, g, lam, p):
+            return (e_none if isinstance(op, _evidence.Identity) else e_blur), 0.0
+            yield
+
+        return fake
+
+    monkeypatch.setattr(_evidence, "noise_sigma", lambda g: sigma)
+    monkeypatch.setattr(_evidence, "blur_reach", lambda *a, **k: 2.0)
+    g = torch.zeros((3, 3, 16, 16, 1))
+    gain = 10 * sigma**2
+    for relative, found in ((0.03, False), (0.12, True)):
+        monkeypatch.setattr(_evidence, "_objective", objectives(gain / relative, gain / relative - gain))
+        ev = run_to_completion(_evidence.blur_evidence(g, linear_path(1.0), BlindParams(), torch.device("cpu")))
+        assert ev["gain"] == pytest.approx(10) and ev["relative"] == pytest.approx(relative)
+        assert ev["blur_found"] is found
+        if not found:
+            assert "%" in _evidence.evidence_message(ev)
+
+
+def test_blur_reach_of_a_downsampled_large_view_is_in_full_resolution_px():
+    # blur_reach: path extent (views) times the 95th percentile disparity (px/view) of the full-resolution view;
+    # two halves at +-2 px/view and a 1-view path: 2 px, also on a view large enough to be measured downsampled
+    def halves(Y, d=2, V=5, pad=12):
+        tex = gaussian_filter(np.random.default_rng(0).uniform(0, 1, (Y + 2 * pad, Y + 2 * pad)), 1.5)
+        lf = np.empty((V, V, Y, Y, 1), np.float32)
+        for v in range(V):
+            for u in range(V):
+                dv, du = v - (V - 1) // 2, u - (V - 1) // 2
+                lf[v, u, :, :, 0] = tex[pad - d * dv : pad - d * dv + Y, pad - d * du : pad - d * du + Y]
+        return torch.as_tensor(lf)
+
+    for Y in (32, 340):  # 340 x 340 > 4 * DISPARITY_PIXELS: downsampled by 2
+        assert _evidence.blur_reach(linear_path(1.0), 32, halves(Y)) == pytest.approx(2.0, abs=0.3), Y
+
+
+def test_no_agreement_check_runs_when_the_evidence_is_not_required(monkeypatch):
+    # iter_verdict: the agreement check runs only when the test finds little blur, require_evidence holds and the
+    # light restoration would move the image by at least MIN_REACH px
+    from napari_lfdeblur.blind._params import PathEstimate
+
+    calls = []
+
+    def evidence(*a, **k):
+        return {"blur_found": False, "reach": 2.0, "gain": 0.5, "relative": 0.01}
+        yield
+
+    def disagreement(*a, **k):
+        calls.append(1)
+        return 0.0, []
+        yield
+
+    monkeypatch.setattr(_evidence, "blur_evidence", evidence)
+    monkeypatch.setattr(_evidence, "iter_disagreement", disagreement)
+    g = torch.zeros((3, 3, 16, 16, 1))
+    split = ([g], [(0, 0, 16, 16)], (16, 16), np.random.default_rng(0), 1.0)
+    est = PathEstimate(linear_path(1.0), [1.0], 1)
+    for required, checked in ((False, False), (True, True)):
+        p = BlindParams(require_evidence=required, light_restoration=0.5)
+        calls.clear()
+        ev, light = run_to_completion(_evidence.iter_verdict(split, est, p, torch.device("cpu")))
+        assert bool(calls) is checked and np.isnan(ev["disagreement"]) is not checked
+        assert light == (0.5 if checked else 0.0)
+
+
+def _joint_run(monkeypatch, d_inf=0.0, n_iter=6):
+    """The 'paper' preset on a tiny blurred scene: (its 'path (joint)' records, the d_inf of its operators)."""
+    from napari_lfdeblur.blind import _joint
+
+    seen = []
+
+    class Spy(BlurOperator):
+        def __init__(self, *a, **k):
+            seen.append(k.get("infinity_disparity"))
+            super().__init__(*a, **k)
+
+    monkeypatch.setattr(_joint, "BlurOperator", Spy)
+    lf, _ = synthetic_scene((3, 3, 16, 16), seed=0)
+    b = simulate_blur(lf, linear_path(1.0), n_times=8, infinity_disparity=d_inf)
+    p = BlindParams.preset("paper").replace(joint={"n_iter": n_iter}, final=None)
+    recs = [r for r in iter_blind_deblur(b, params=p, infinity_disparity=d_inf, device="cpu")
+            if r.stage == "path (joint)"]
+    return recs, seen, p
+
+
+def test_the_joint_prior_weight_and_eps_follow_their_published_schedule(monkeypatch):
+    # JointParams: the prior weight decays by prior_decay per iteration down to prior_floor of its start, eps by
+    # eps_decay down to eps_min
+    recs, _, p = _joint_run(monkeypatch)
+    j = p.joint
+    its = [r.iteration for r in recs]
+    assert its and its == sorted(set(its))
+    w = [j.prior_weight * max(j.prior_decay ** (i - 1), j.prior_floor) for i in its]
+    eps = [max(j.eps * j.eps_decay ** (i - 1), j.eps_min) for i in its]
+    np.testing.assert_allclose([r.info["prior_weight"] for r in recs], w, rtol=1e-12)
+    np.testing.assert_allclose([r.info["eps"] for r in recs], eps, rtol=1e-12)
+    assert recs[0].info["prior_weight"] == pytest.approx(j.prior_weight)  # no decay at the first iteration
+
+
+def test_the_joint_method_models_the_infinity_disparity_it_is_given(monkeypatch):
+    # the joint method fits the blur of the MODEL.md d_inf model, so every blur operator it builds has that d_inf
+    _, seen, _ = _joint_run(monkeypatch, d_inf=0.5, n_iter=2)
+    assert seen and all(d == 0.5 for d in seen)

@@ -296,3 +296,58 @@ def test_final_stage_progress_counts_every_channel_and_only_grows():
                       records.append)
     final = [r for r in records if r.stage == "final"]
     assert [r.iteration for r in final] == [1, 2, 3] and {r.n_iterations for r in final} == {3}
+
+
+def test_check_windows_takes_windows_up_to_the_view_edge_and_touching_windows_but_not_one_px_beyond():
+    from napari_lfdeblur.blind._windows import check_windows
+
+    p = BlindParams()  # 3dof, alternating: several windows allowed
+    shape = (5, 5, 40, 80)
+    # a window reaching exactly to the far edge lies inside the view; one px further does not
+    assert check_windows([(0, 40, 40, 40)], shape, p) == [(0, 40, 40, 40)]
+    for outside in [(1, 0, 40, 40), (0, 41, 40, 40)]:
+        with pytest.raises(ValueError, match="reaches outside"):
+            check_windows([outside], shape, p)
+    # two halves of the view touch but share no pixel: they do not overlap
+    halves = [(0, 0, 40, 40), (0, 40, 40, 40)]
+    assert check_windows(halves, shape, p) == halves
+    with pytest.raises(ValueError, match="overlap"):
+        check_windows([(0, 0, 40, 41), (0, 40, 40, 40)], shape, p)
+
+
+@pytest.mark.parametrize("d_inf", [1.5, -1.5])
+def test_chosen_windows_keep_the_refocusing_margin_for_either_sign_of_the_infinity_disparity(d_inf):
+    from napari_lfdeblur.blind._windows import path_windows
+
+    # refocused samples read |d_inf| (max(V, U) - 1) / 2 px beyond the view (choose_region): 1.5 * 4 / 2 = 3 px
+    arr = np.full((5, 5, 100, 100), 0.5, np.float32)
+    arr[:, :, :30, :30] = np.random.default_rng(3).random((30, 30))  # the only texture in a corner
+    p = BlindParams().replace(path={"region": 40, "n_regions": 1})
+    _, windows = path_windows(arr, d_inf, p, torch.device("cpu"), True)
+    assert len(windows) == 1 and windows[0][2:] == (40, 40)
+    assert windows[0][0] >= 3 and windows[0][1] >= 3
+
+
+def test_region_grid_puts_its_rows_along_the_shorter_side():
+    from napari_lfdeblur.blind._region import region_grid
+
+    # region_grid: rows the largest divisor of n not above sqrt(n), along the shorter side of the view
+    assert region_grid(100, 300, 40, 2) == (1, 2)
+    assert region_grid(300, 100, 40, 2) == (2, 1)
+    assert region_grid(100, 300, 40, 6) == (2, 3)
+    g = torch.as_tensor(np.random.default_rng(5).random((3, 3, 100, 300, 1), dtype=np.float32))
+    windows = choose_regions(g, 40, 0.0, n=2)
+    # one window in each half of the 300-px side
+    assert sorted(x0 + w <= 150 for _, x0, _, w in windows) == [False, True]
+    assert all(x0 >= 150 for _, x0, _, w in windows if x0 + w > 150)
+
+
+def test_choose_region_tries_the_window_flush_with_the_far_edges():
+    # choose_region: candidate corners on a grid of step size // 8, the last one flush with the far edge; with
+    # size 38 the step is 4 and y0 = 100 - 38 = 62 is off that grid, so only the flush candidate reaches the
+    # texture's far rows
+    img = np.full((100, 150), 0.5)
+    img[80:, 130:] = np.random.default_rng(2).random((20, 20))
+    g = torch.as_tensor(np.broadcast_to(img, (3, 3, 100, 150)).astype(np.float32).copy())[..., None]
+    y0, x0, h, w = choose_region(g, 38, 0.0)
+    assert (y0 + h, x0 + w) == (100, 150)

@@ -456,3 +456,18 @@ def test_rotation_stage_stops_when_the_fit_stalls_or_the_path_settles():
     # any path counts as settled: the alternations stop after the second
     _, fits, info = _rotation_stage_records({**never, "path_tol": 1e9})
     assert fits == [3] * 2 and len(info["rotation_fit"]) == 2
+
+
+def test_the_rotation_fit_holds_rotations_to_the_limit_in_radians_not_in_its_px_units():
+    from napari_lfdeblur.blind import BlindParams
+    from napari_lfdeblur.blind._rotation import _Fit
+
+    # the fit optimises R r (px of image motion, r_px = 12 here); the bound MAX_ROTATION is in radians
+    # (docs/model.md), so a yaw of +-0.1 rad (half the limit) must survive a negligible step unchanged
+    g = torch.as_tensor(_lf((3, 3, 16, 16)))[..., None]
+    cp = np.array([[0.0, 0.0, 0.0, 0.0, -0.1, 0.0], [0.0, 0.0, 0.0, 0.0, 0.1, 0.0]])
+    rp = BlindParams(motion="6dof").rotation.replace(lr=1e-6)
+    fit = _Fit(g, g, 0.5, (0, 0, 16, 16), rp, 12.0, 2.0, cp, torch.device("cpu"))
+    fit.step()
+    assert 0.1 < MAX_ROTATION
+    np.testing.assert_allclose(fit.control_points()[:, 4], [-0.1, 0.1], atol=1e-3)
