@@ -702,6 +702,40 @@ def test_recover_plane_texture_finds_the_disparity_of_a_symmetric_motion(d):
     assert recover_plane_texture(lf).disparity == pytest.approx(d, abs=0.005)  # without blur: exactly
 
 
+@pytest.mark.parametrize("d", [2.0, -1.5])
+def test_recover_plane_texture_finds_the_disparity_on_views_larger_than_the_sweep(d):
+    # views of 128 px are swept area-averaged by k = 2 (to about SWEEP_PIXELS = 64 px), where a disparity is
+    # d / k px/view: the found disparity is that of the full views (the Lytro sample's views are 128 px)
+    lf = plane_lightfield((5, 5, 128, 128), d, seed=4)
+    assert recover_plane_texture(lf, n_slices=3).disparity == pytest.approx(d, abs=0.05)
+
+
+@pytest.mark.parametrize("p_z", [3.0, -3.0])
+def test_recover_plane_texture_profile_peaks_where_a_still_camera_stands(p_z):
+    # a camera held still at p_z sees the plane magnified by s = 1 + d p_z / R, at disparity d / s (docstring of
+    # recover_plane_texture): the slice refocused there is the sharpest, so the profile peaks at dwell_p = p_z, on
+    # the side of p_z's sign. A non-integer d, so that the slice at p = 0 is not favoured by exact pixel shifts.
+    d = 1.3
+    lf = plane_lightfield((5, 5, 64, 64), d, seed=3)
+    blurred = simulate_blur(lf, [[0.0, 0.0, p_z], [0.0, 0.0, p_z]], n_times=32)
+    res = recover_plane_texture(blurred, disparity=d)  # p_range 3: the profile's grid ends at +-3
+    assert res.dwell_p[np.argmax(res.dwell)] == pytest.approx(p_z)
+    assert np.sign((res.dwell_p * res.dwell).sum()) == np.sign(p_z)
+
+
+def test_plane_texture_kernel_dots_are_spaced_d_squared_p_over_r():
+    from napari_lfdeblur.special_cases import _kernel_image
+
+    # PlaneTextureResult.kernel: each instant p spreads into a V x U grid of dots spaced d^2 p / R px, each 1 / (UV)
+    # of the instant's weight. d = 2, R = 32: p = 8 gives 1 px (a 5 x 5 block of 1/25), p = 16 gives 2 px.
+    for p, spacing in ((8.0, 1), (16.0, 2)):
+        K = _kernel_image(np.array([p]), np.array([1.0]), 2.0, 32.0, 5, 5)
+        half = 2 * spacing + 1  # the dots reach 2 spacings from the centre, plus one pixel of margin
+        want = np.zeros((2 * half + 1, 2 * half + 1))
+        want[1 : 2 * half : spacing, 1 : 2 * half : spacing] = 1 / 25
+        np.testing.assert_allclose(K, want, atol=1e-7)
+
+
 # --------------------------------------------------------------- params
 
 

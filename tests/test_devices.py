@@ -13,6 +13,7 @@ from napari_lfdeblur.devices import empty_cache, free_memory, select_device
 def test_select_device():
     assert select_device("cpu") == torch.device("cpu")
     assert select_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+    assert select_device(None) == select_device("auto")  # docstring: "'auto' (or None)"
     with pytest.raises(ValueError, match="unknown device"):
         select_device("tpu")
     if not torch.cuda.is_available():
@@ -71,12 +72,22 @@ def test_host_memory_matches_proc_meminfo():
 
 @pytest.mark.skipif(not Path("/proc/meminfo").exists(), reason="needs /proc/meminfo")
 def test_host_memory_without_psutil_reads_proc_meminfo_in_bytes(monkeypatch):
+    import io
     import sys
 
     psutil = pytest.importorskip("psutil")
     want = psutil.virtual_memory().available
     monkeypatch.setitem(sys.modules, "psutil", None)  # as where psutil is not installed: its import fails
     assert host_available_memory() == pytest.approx(want, rel=0.1)
+    # /proc/meminfo states kB meaning KiB (proc(5)): 1000 kB are 1024000 bytes, exactly
+    meminfo = "MemTotal:        8000 kB\nMemFree:          500 kB\nMemAvailable:    1000 kB\n"
+    real_open = open
+
+    def fake_open(path, *args, **kwargs):
+        return io.StringIO(meminfo) if path == "/proc/meminfo" else real_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(_memory, "open", fake_open, raising=False)  # found before the builtin by the module
+    assert host_available_memory() == 1024000
 
 
 def test_cpu_fallback_passes_a_cpu_run_through_and_reraises_cpu_errors():

@@ -84,8 +84,20 @@ def test_scene_disparity_finds_a_plane():
     assert scene_disparity(torch.zeros(3, 3, 8, 8, 1), 2.0).shape == (8, 8)
     # with d_inf, the search reaches |d_inf| further: a plane at 3.5 px/view (beyond the reach alone) is found
     lf = plane_lightfield((5, 5, 32, 32), 3.5)
-    est = scene_disparity(torch.as_tensor(lf)[..., None], 2.0)
-    assert np.median(est[6:-6, 6:-6]) == pytest.approx(3.5, abs=0.07)
+    # the search reaches DISPARITY_REACH + |d_inf|, for d_inf < 0 as well (the mirror image of the case above)
+    for d, d_inf in ((3.5, 2.0), (-3.5, -2.0)):
+        lf = plane_lightfield((5, 5, 32, 32), d)
+        est = scene_disparity(torch.as_tensor(lf)[..., None], d_inf)
+        assert np.median(est[6:-6, 6:-6]) == pytest.approx(d, abs=0.07)
+
+
+def test_scene_disparity_reaches_its_documented_limit():
+    # with d_inf = 0 the shears tried are |d| <= DISPARITY_REACH = 2.5 px/view (documented in _disparity) in steps
+    # of 0.125: a plane at exactly +-2.5 is on the grid, and found there
+    for d in (2.5, -2.5):
+        lf = plane_lightfield((5, 5, 32, 32), d)
+        est = scene_disparity(torch.as_tensor(lf)[..., None], 0.0)
+        assert np.median(est[6:-6, 6:-6]) == pytest.approx(d, abs=0.01)
 
 
 @pytest.mark.parametrize("isotropic, coupled", [(True, True), (True, False), (False, True), (False, False)])

@@ -20,6 +20,15 @@ def test_shape_dtype_range_and_determinism():
     np.testing.assert_array_equal(disp, disp3)
 
 
+def test_grey_scene_is_the_luminance_of_the_colour_scene():
+    # color=False gives luminance (docstring) of the same draws as the colour scene: the Rec. 709 (sRGB) relative
+    # luminance 0.2126 R + 0.7152 G + 0.0722 B of every colour view
+    for seed in (0, 1, 2):
+        colour, _ = procedural_scene((3, 3, 24, 24), seed=seed)
+        grey, _ = procedural_scene((3, 3, 24, 24), seed=seed, color=False)
+        np.testing.assert_allclose(grey, colour.astype(np.float64) @ [0.2126, 0.7152, 0.0722], atol=1e-5)
+
+
 @pytest.mark.parametrize("d_inf", [0.0, -1.0, 2.0])
 def test_disparities_are_nearer_than_infinity(d_inf):
     for seed in range(6):
@@ -40,6 +49,28 @@ def test_seeds_give_different_scenes_with_depth_and_occlusion():
     assert min(n_planes) >= 2 and max(n_planes) >= 4  # the nearer planes occlude the background
     means = [lf.mean() for lf, _ in scenes]
     assert max(means) - min(means) > 0.1  # bright and dark scenes
+
+
+def test_default_scenes_have_3_to_6_planes_and_a_fine_texture(monkeypatch):
+    from napari_lfdeblur.samples import _procedural
+
+    # docstring: by default 3 to 6 planes, background included, drawn from the seed; at least one plane carries a
+    # fine texture (FINE_TEXTURES). Record the plane count and the texture names each scene draws.
+    counts, names = [], []
+    deltas, texture = _procedural._deltas, _procedural._texture
+    monkeypatch.setattr(_procedural, "_deltas", lambda rng, n: counts.append(n) or deltas(rng, n))
+
+    def recording_texture(rng, name, *args):
+        names[-1].append(name)
+        return texture(rng, name, *args)
+
+    monkeypatch.setattr(_procedural, "_texture", recording_texture)
+    for seed in range(30):
+        names.append([])
+        procedural_scene((3, 3, 16, 16), seed=seed)
+        assert any(name in _procedural.FINE_TEXTURES for name in names[-1]), (seed, names[-1])
+    assert len(counts) == 30 and set(counts) == {3, 4, 5, 6}
+    assert [len(n) for n in names] == counts  # one texture per plane
 
 
 def test_single_plane_moves_by_its_disparity():

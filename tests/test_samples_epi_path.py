@@ -76,6 +76,19 @@ def test_synthetic_scene_occlusion_front_layer_wins():
     assert set(np.unique(disp)) == {0.25, 1.5}  # both layers visible, near one in front somewhere
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_synthetic_scene_disparity_map_lies_on_its_layers(seed):
+    # the same seed and disparity range draw the same background layer (and render margin) with one layer or two:
+    # the centre view differs only where the front layer shows, and the ground truth gives that region the front
+    # layer's disparity (the range's top, 1.0) pixel for pixel, but for the antialiased rim of its edges
+    two, disp = synthetic_scene((5, 5, 48, 48), n_layers=2, seed=seed, disparity_range=(-1.0, 1.0))
+    back, _ = synthetic_scene((5, 5, 48, 48), n_layers=1, seed=seed, disparity_range=(-1.0, 1.0))
+    front = np.abs(two[2, 2] - back[2, 2]) > 1e-6
+    assert front.sum() > 50
+    rim = ndimage.binary_dilation(front, iterations=4) & ~ndimage.binary_erosion(front, iterations=4)
+    np.testing.assert_array_equal((disp == 1.0)[~rim], front[~rim])
+
+
 def test_synthetic_scene_bad_input():
     with pytest.raises(ValueError, match="shape"):
         synthetic_scene((5, 5, 32))
