@@ -761,3 +761,18 @@ def test_errors_give_the_command_lines_options_not_python_keywords(lf_file, tmp_
     if not torch.cuda.is_available():
         assert main(["demo", "--out", str(tmp_path / "d"), "--device", "cuda"]) == 2
         assert "use --device auto or cpu" in capsys.readouterr().err
+
+
+def test_simulate_help_states_the_preset_defaults_it_uses(lf_file, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["simulate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "EXTENT in views, default 2" in text and "SEED for shake, shake6 and random, default 0" in text
+    _, src = lf_file
+    for short, full in [("linear", "linear:2"), ("shake", "shake:2:0"), ("random", "random:2:0")]:
+        assert main(["simulate", str(src), str(tmp_path / f"{short}.npz"), "--path", short, "--device", "cpu"]) == 0
+        assert main(["simulate", str(src), str(tmp_path / f"{short}_full.npz"), "--path", full,
+                     "--device", "cpu"]) == 0
+        np.testing.assert_array_equal(load_path_json(tmp_path / f"{short}.path.json"),
+                                      load_path_json(tmp_path / f"{short}_full.path.json"))
+    np.testing.assert_allclose(np.ptp(load_path_json(tmp_path / "linear.path.json")[:, 0]), 2.0)  # 2 views long

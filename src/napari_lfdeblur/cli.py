@@ -145,9 +145,9 @@ def _add_simulate(sub):
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
     p.add_argument("--path", required=True,
                    help="camera path: a JSON file of control points ((n, 3), or (n, 6) with a rotation), or "
-                   "PRESET[:EXTENT[:SEED]] with PRESET one of linear, arc, shake, shake6, random; EXTENT in views "
-                   "(the length of linear and arc; the side of the box that shake and random draw their control "
-                   "points from, whose motion is shorter); SEED for shake, shake6 and random. "
+                   "PRESET[:EXTENT[:SEED]] with PRESET one of linear, arc, shake, shake6, random; EXTENT in views, "
+                   "default 2 (the length of linear and arc; the side of the box that shake and random draw their "
+                   "control points from, whose motion is shorter); SEED for shake, shake6 and random, default 0. "
                    "shake6 is shake plus a random camera rotation (handheld shake), written "
                    "shake6[:EXTENT[:SEED[:ROTATION]]] with ROTATION the largest rotation in radians (default 0.005, "
                    "at most 0.2)")
