@@ -1422,7 +1422,7 @@ def test_a_small_relative_gain_alone_keeps_the_blur_from_being_found(monkeypatch
 
 def test_blur_reach_of_a_downsampled_large_view_is_in_full_resolution_px():
     # blur_reach: path extent (views) times the 95th percentile disparity (px/view) of the full-resolution view;
-    # two halves at +-2 px/view and a 1-view path: 2 px, also on a view large enough to be measured downsampled
+    # a plane at 2 px/view and a 1-view path: 2 px, also on a view large enough to be measured downsampled
     def halves(Y, d=2, V=5, pad=12):
         tex = gaussian_filter(np.random.default_rng(0).uniform(0, 1, (Y + 2 * pad, Y + 2 * pad)), 1.5)
         lf = np.empty((V, V, Y, Y, 1), np.float32)
