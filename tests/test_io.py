@@ -183,12 +183,18 @@ def test_views_jpeg(tmp_path, lf_rgb):
     np.testing.assert_allclose(out[1, 2], ref, atol=1e-6)
 
 
+def _hci_views(folder, lf8):
+    """Write the views of ``lf8`` (V, U, Y, X, C) as HCI's input_CamNNN.png, row-major."""
+    folder.mkdir()
+    V, U = lf8.shape[:2]
+    for k in range(V * U):
+        iio.imwrite(folder / f"input_Cam{k:03d}.png", lf8[k // U, k % U])
+    return folder
+
+
 def test_views_hci(tmp_path, lf_rgb):
     lf8 = _u8(lf_rgb[:3, :3])
-    folder = tmp_path / "boxes"
-    folder.mkdir()
-    for k in range(9):
-        iio.imwrite(folder / f"input_Cam{k:03d}.png", lf8[k // 3, k % 3])
+    folder = _hci_views(tmp_path / "boxes", lf8)
     iio.imwrite(folder / "valid_mask.png", lf8[0, 0, :, :, 0])  # an extra image that is not a view
     (folder / "parameters.cfg").write_text(
         "[intrinsics]\nfocal_length_mm = 100\nsensor_size_mm = 35\n\n"
@@ -206,10 +212,7 @@ def test_views_hci(tmp_path, lf_rgb):
 def test_views_hci_non_square_grid(tmp_path, lf_rgb):
     # docs/io.md: input_CamNNN views are row-major; grid=(V, U) for a grid that is not square
     lf8 = _u8(lf_rgb[:2, :3])
-    folder = tmp_path / "wide"
-    folder.mkdir()
-    for k in range(6):
-        iio.imwrite(folder / f"input_Cam{k:03d}.png", lf8[k // 3, k % 3])
+    folder = _hci_views(tmp_path / "wide", lf8)
     np.testing.assert_array_equal(read_lightfield(folder, grid=(2, 3)), lf8 / np.float32(255))
 
 

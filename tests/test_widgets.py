@@ -525,18 +525,23 @@ def test_epis_follow_a_layer_whose_data_change(make_napari_viewer, lf):
         np.testing.assert_allclose(viewer.layers[f"lf EPI {which}"].scale, want["scale"])
 
 
-def test_epi_pick_by_clicking(make_napari_viewer, lf):
-    from types import SimpleNamespace
-
+def _epi_picking_by_click(make_napari_viewer, data):
+    """A viewer with ``data`` as layer 'lf' and the EPI widget on it picking by click: (viewer, widget, callback)."""
     from napari_lfdeblur._napari.widgets import EpiWidget
 
     viewer = make_napari_viewer()
-    viewer.add_image(lf, name="lf")
+    viewer.add_image(data, name="lf")
     w = EpiWidget(viewer)
     viewer.window.add_dock_widget(w)
     w.epi.layer_combo.set_layer("lf")
     w.epi.click_box.value = True
-    callback = viewer.mouse_drag_callbacks[-1]
+    return viewer, w, viewer.mouse_drag_callbacks[-1]
+
+
+def test_epi_pick_by_clicking(make_napari_viewer, lf):
+    from types import SimpleNamespace
+
+    viewer, w, callback = _epi_picking_by_click(make_napari_viewer, lf)
     callback(viewer, SimpleNamespace(position=(1.0, 3.0, 5.2, 9.7)))  # (v, u, y, x) world coordinates
     assert (w.epi.v.value, w.epi.u.value, w.epi.y.value, w.epi.x.value) == (1, 3, 5, 10)
     np.testing.assert_array_equal(viewer.layers["lf EPI h"].data, lf[1, :, 5, :])
@@ -550,16 +555,9 @@ def test_epi_pick_by_clicking(make_napari_viewer, lf):
 def test_epi_pick_by_clicking_on_more_view_rows_than_columns(make_napari_viewer):
     from types import SimpleNamespace
 
-    from napari_lfdeblur._napari.widgets import EpiWidget
-
     tall = np.random.default_rng(0).random((7, 3, 8, 8)).astype(np.float32)  # 7 view rows, 3 view columns
-    viewer = make_napari_viewer()
-    viewer.add_image(tall, name="lf")
-    w = EpiWidget(viewer)
-    viewer.window.add_dock_widget(w)
-    w.epi.layer_combo.set_layer("lf")
-    w.epi.click_box.value = True
-    viewer.mouse_drag_callbacks[-1](viewer, SimpleNamespace(position=(6.0, 1.0, 2.0, 3.0)))  # the last view row
+    viewer, w, callback = _epi_picking_by_click(make_napari_viewer, tall)
+    callback(viewer, SimpleNamespace(position=(6.0, 1.0, 2.0, 3.0)))  # the last view row
     assert (w.epi.v.value, w.epi.u.value, w.epi.y.value, w.epi.x.value) == (6, 1, 2, 3)
     np.testing.assert_array_equal(viewer.layers["lf EPI h"].data, tall[6, :, 2, :])
 
