@@ -18,8 +18,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 TABLES = ROOT / "docs" / "benchmarks"
 
-__all__ = ["ROOT", "TABLES", "add_out_argument", "command_line", "cpu_model", "default_table", "machine",
-           "table_path", "write_table"]
+__all__ = ["ROOT", "TABLES", "add_out_argument", "command_line", "cpu_model", "default_table", "exit_status",
+           "machine", "table_path", "write_table"]
 
 
 def cpu_model() -> str:
@@ -101,3 +101,15 @@ def write_table(path: str | Path, title: str, command: str, machine_line: str, b
     path.write_text("\n".join(lines).rstrip("\n") + "\n")
     print(f"wrote {path}", file=sys.stderr)
     return path
+
+
+def exit_status(failed: list[str]) -> int:
+    """The exit status of a script whose runs ``failed`` (their names): 0 when none did, else 1, said on stderr.
+
+    A script with failed runs leaves its table as it was: a table without
+    them would pass for a complete one.
+    """
+    if not failed:
+        return 0
+    print(f"{len(failed)} run(s) failed ({', '.join(failed)}): no table written", file=sys.stderr)
+    return 1

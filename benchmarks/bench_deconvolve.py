@@ -165,7 +165,7 @@ def main(argv=None):
         import torch
 
         args.devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
-    results = []
+    results, failed = [], []
     print("\n".join(HEADER))
     for device in args.devices:
         for case in args.cases:
@@ -175,15 +175,16 @@ def main(argv=None):
             line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
             if proc.returncode != 0 or not line:
                 print(f"| {device} | {case} | failed: {proc.stderr.strip().splitlines()[-1:]} |", flush=True)
+                failed.append(f"{device} {case}")
                 continue
             r = json.loads(line[0][7:])
             results.append(r)
             print(_fmt(r), flush=True)
     out = _report.table_path(args.out, __file__, smoke=args.quick)
-    if out is not None and results:
+    if out is not None and results and not failed:
         _write(results, shape, out, argv)
-    return results
+    return _report.exit_status(failed)
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

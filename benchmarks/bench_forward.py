@@ -178,7 +178,7 @@ def main(argv=None):
     device = select_device(args.device)
     print(f"blur operator, {shape} float32, T = {args.n_times}, device {device}, torch {torch.__version__}, "
           f"{torch.get_num_threads()} threads")
-    rows = []
+    rows, failed = [], []
     for variant in args.variants:
         cmd = [sys.executable, __file__, "--variant", variant, "--shape", *map(str, shape),
                "--n-times", str(args.n_times), "--device", str(device), "--repeats", str(args.repeats)]
@@ -188,6 +188,7 @@ def main(argv=None):
         res = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if res.returncode != 0:
             print(f"{variant} failed:\n{res.stderr[-2000:]}")
+            failed.append(variant)
             continue
         rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
     print(f"{'implementation':<14} {'forward (s)':>12} {'fwd+bwd (s)':>12} {'peak extra (x LF)':>18}")
@@ -196,8 +197,9 @@ def main(argv=None):
     for line in _speed_ups(rows):
         print(line)
     print(f"(light field size: {rows[0]['lf_mb']:.0f} MiB)" if rows else "")
-    if rows:
+    if rows and not failed:
         _write(rows, shape, args, argv, device)
+    return _report.exit_status(failed)
 
 
 def _speed_ups(rows):
@@ -232,4 +234,4 @@ def _write(rows, shape, args, argv, device):
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -127,7 +127,7 @@ def main(argv=None):
     device = select_device(args.device)
     ds = sorted(set(args.infinity_disparity) | {0.0}, key=lambda d: (d != 0.0, abs(d), d))
     engines = [e for e in args.engine if e == "torch" or (device.type == "cpu" and _fused.available(device))]
-    rows = []
+    rows, failed = [], []
     for engine, T, d in itertools.product(engines, args.n_times, ds):
         cmd = [sys.executable, __file__, "--point", str(T), str(d), "--shape", *map(str, shape),
                "--device", str(device), "--repeats", str(args.repeats)]
@@ -135,6 +135,7 @@ def main(argv=None):
         res = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if res.returncode != 0:
             print(f"{engine} T={T} d_inf={d} failed:\n{res.stderr[-2000:]}")
+            failed.append(f"{engine} T={T} d_inf={d}")
             continue
         row = json.loads(res.stdout.strip().splitlines()[-1]) | {"engine": engine}
         ref = next((r for r in rows if (r["engine"], r["n_times"], r["d_inf"]) == (engine, T, 0.0)), row)
@@ -142,8 +143,9 @@ def main(argv=None):
         row["ratio_fwd_bwd"] = row["fwd_bwd_s"] / ref["fwd_bwd_s"]
         rows.append(row)
         print(_line(row), flush=True)
-    if rows:
+    if rows and not failed:
         _write(rows, shape, args, argv, device)
+    return _report.exit_status(failed)
 
 
 def _line(r) -> str:
@@ -177,4 +179,4 @@ def _write(rows, shape, args, argv, device):
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

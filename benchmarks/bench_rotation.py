@@ -55,7 +55,7 @@ def main(argv=None):
         print(json.dumps(measure(shape, int(T), d, args.device, args.repeats, rotation=rotation)))
         return
     device = select_device(args.device)
-    rows = []
+    rows, failed = [], []
     for T in args.n_times:
         for d in args.infinity_disparity:
             pair = []
@@ -65,6 +65,7 @@ def main(argv=None):
                 res = subprocess.run(cmd, capture_output=True, text=True)
                 if res.returncode != 0:
                     print(f"T={T} d_inf={d} rotation={rot} failed:\n{res.stderr[-2000:]}")
+                    failed.append(f"T={T} d_inf={d} rotation={rot}")
                     break
                 row = json.loads(res.stdout.strip().splitlines()[-1])
                 row["motion"] = "6-DOF" if rot > 0 else "3-DOF"
@@ -74,8 +75,9 @@ def main(argv=None):
                 row["ratio_fwd_bwd"] = row["fwd_bwd_s"] / pair[0]["fwd_bwd_s"]
                 rows.append(row)
                 print(_line(row), flush=True)
-    if rows:
+    if rows and not failed:
         _write(rows, shape, args, argv, device)
+    return _report.exit_status(failed)
 
 
 def _line(r) -> str:
@@ -105,4 +107,4 @@ def _write(rows, shape, args, argv, device):
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())
