@@ -382,6 +382,18 @@ def test_path_json_round_trip_and_no_overwrite(tmp_path):
     assert fields == {}
 
 
+def test_path_json_takes_numpy_values_in_its_fields(tmp_path):
+    # what a script has at hand (a seed drawn by numpy, a float32 score, a small array) is written as JSON
+    from napari_lfdeblur.path import read_path_json
+
+    f = save_path_json(tmp_path / "p.json", linear_path(1.0), n_times=np.int64(16), seed=np.int64(7),
+                       score=np.float32(0.25), window=np.array([4, 8]), note={"k": (np.float64(1.5), "a")})
+    _, fields = read_path_json(f)
+    assert fields["n_times"] == 16 and fields["seed"] == 7 and fields["score"] == 0.25
+    assert fields["window"] == [4, 8] and fields["note"] == {"k": [1.5, "a"]}
+    assert not [p for p in tmp_path.iterdir() if p.name != "p.json"]  # no temporary left behind
+
+
 @pytest.mark.parametrize("doc, words", [
     ({"control_points": [["1", 0, 0], [0, 0, 0]]}, "control points must be numbers; got '1'"),
     ({"control_points": [[True, 0, 0], [0, 0, 0]]}, "control points must be numbers; got True"),

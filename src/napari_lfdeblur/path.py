@@ -257,8 +257,10 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
     The fields the package reads back are ``n_times``, ``infinity_disparity``
     and ``view_shape``, the ``(Y, X)`` of the views the path belongs to
     (:func:`path_view_mismatch`); they are checked here as they are when
-    read. The file is written to a temporary name and renamed, so a failure
-    leaves no half-written file. An existing file is kept unless
+    read. Other values are written as JSON: numpy scalars as numbers,
+    tuples and arrays (of up to 4096 elements; larger ones as a short
+    description) as lists, any other object as its ``repr``. The file is written to a temporary name and renamed, so a
+    failure leaves no half-written file. An existing file is kept unless
     ``overwrite``.
 
     Raises
@@ -279,7 +281,7 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
     >>> read_path_json(f)[1]["view_shape"]
     [376, 541]
     """
-    from .io._write import PATH_FIELDS, check_path_field
+    from .io._write import PATH_FIELDS, check_path_field, jsonable
 
     cp = validate_control_points(control_points)
     for key in PATH_FIELDS:
@@ -303,7 +305,7 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
     }
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     try:
-        tmp.write_text(json.dumps(doc, indent=2))
+        tmp.write_text(json.dumps(jsonable(doc), indent=2))
         os.replace(tmp, path)
     finally:
         if tmp.exists():
