@@ -236,3 +236,17 @@ def test_non_finite_points_and_infinity_disparity_are_refused():
     cp = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     with pytest.raises(ValueError, match="infinity_disparity must be finite"):
         path_error(cp, cp, infinity_disparity=float("nan"))
+
+
+def test_metrics_take_torch_tensors_that_require_grad():
+    # what a script in the middle of an optimisation holds: the numbers are those of the arrays
+    torch = pytest.importorskip("torch")
+    rng = np.random.default_rng(0)
+    est, ref = rng.random((3, 3, 12, 12)), rng.random((3, 3, 12, 12))
+    t = torch.tensor(est, requires_grad=True)
+    assert psnr(t, ref) == psnr(est, ref) and ssim(t, ref) == ssim(est, ref)
+    assert angular_error(t, torch.tensor(ref)) == angular_error(est, ref)
+    a, b = linear_path(1.0), linear_path(2.0, angle_deg=30)
+    assert chamfer_distance(torch.tensor(a, requires_grad=True), b) == chamfer_distance(a, b)
+    with pytest.raises(ValueError, match="different ranges"):  # a uint8 tensor is scored on 0..255, as its array
+        psnr(torch.tensor((est * 255).astype(np.uint8)), ref)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ._lightfield import check_int
+from ._lightfield import as_array, check_int
 
 __all__ = [
     "MAX_ROTATION",
@@ -39,10 +39,8 @@ def validate_control_points(control_points) -> np.ndarray:
         or Inf or values beyond float32's range, or a rotation beyond
         ``MAX_ROTATION`` radians.
     """
-    if hasattr(control_points, "detach") and hasattr(control_points, "cpu"):  # a torch tensor, with grad too
-        control_points = control_points.detach().cpu().numpy()
     try:
-        cp = np.asarray(control_points, dtype=np.float64)
+        cp = as_array(control_points).astype(np.float64)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"control points must be numbers: {exc}") from None
     if cp.ndim != 2 or cp.shape[1] not in (3, 6):

@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 
-__all__ = ["check_int", "check_view_grid", "check_number", "check_seed", "check_infinity_disparity",
+__all__ = ["as_array", "check_int", "check_view_grid", "check_number", "check_seed", "check_infinity_disparity",
            "validate_lightfield", "brightest", "white_level", "caller_stacklevel", "warnings_state",
            "restore_warnings", "DARK_LEVEL", "BRIGHT_LIMIT",
            "MAX_SEED"]
@@ -147,6 +147,14 @@ def check_int(value, name: str, minimum: int | None = None) -> int:
     return int(value)
 
 
+def as_array(x) -> np.ndarray:
+    """``np.asarray(x)``; of a torch tensor, its data, detached and on the CPU (one that requires grad or
+    sits on a GPU too)."""
+    if hasattr(x, "detach") and hasattr(x, "cpu"):
+        x = x.detach().cpu().numpy()
+    return np.asarray(x)
+
+
 def validate_lightfield(lf, name: str = "light field", *, finite: bool = True) -> np.ndarray:
     """Check a light field array and return it as a numpy array (not copied).
 
@@ -175,9 +183,7 @@ def validate_lightfield(lf, name: str = "light field", *, finite: bool = True) -
         On a wrong number of dimensions or channels, an empty array, a
         non-numeric or complex dtype, NaN or Inf.
     """
-    if hasattr(lf, "detach") and hasattr(lf, "cpu"):  # a torch tensor, one that requires grad or on a GPU too
-        lf = lf.detach().cpu().numpy()
-    arr = np.asarray(lf)
+    arr = as_array(lf)
     if arr.ndim in (2, 3):
         raise ValueError(
             f"a {name} is 4D (V, U, Y, X) or 5D (V, U, Y, X, C); got a {arr.ndim}D array of shape "

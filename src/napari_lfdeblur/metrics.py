@@ -7,6 +7,8 @@ estimate with a reference of the same shape. Light fields are
 spatial border (``y`` and ``x`` only, never views) before comparing, because
 the replicated boundary of the blur model makes the outermost pixels
 unrecoverable.
+Arrays may also be torch tensors (their data is read, detached and on the
+CPU).
 
 Path metrics (:func:`path_error`) are blind to what a blur cannot identify
 (docs/model.md, "Ambiguities"): the mean offset of the path
@@ -19,7 +21,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ._lightfield import check_number, white_level
+from ._lightfield import as_array, check_number, white_level
 from .path import bezier_positions, validate_control_points, validate_n_times
 
 __all__ = [
@@ -58,8 +60,8 @@ def _crop(arr: np.ndarray, crop: int) -> np.ndarray:
 
 def _pair(estimate, reference, crop) -> tuple[np.ndarray, np.ndarray]:
     """Validate two arrays of equal shape and crop their spatial borders (float64)."""
-    est = np.asarray(estimate)
-    ref = np.asarray(reference)
+    est = as_array(estimate)
+    ref = as_array(reference)
     for name, arr in (("estimate", est), ("reference", ref)):
         if not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool) or np.iscomplexobj(arr):
             raise ValueError(f"the {name} must hold real numbers; got dtype {arr.dtype}")
@@ -117,10 +119,11 @@ def _data_range(value, estimate, reference) -> float:
     None: the top of the inputs' range (:func:`white_level` of their dtype), when they agree on it.
     """
     if value is None:
-        levels = {white_level(np.asarray(a).dtype) for a in (estimate, reference)}
+        dtypes = [as_array(a).dtype for a in (estimate, reference)]
+        levels = {white_level(d) for d in dtypes}
         if len(levels) > 1:
-            raise ValueError(f"estimate ({np.asarray(estimate).dtype}) and reference ({np.asarray(reference).dtype}) "
-                             f"have different ranges: give data_range")
+            raise ValueError(f"estimate ({dtypes[0]}) and reference ({dtypes[1]}) have different ranges: "
+                             "give data_range")
         return levels.pop()
     value = check_number(value, "data_range")
     if not value > 0:
@@ -284,8 +287,8 @@ def chamfer_distance(a, b) -> float:
     ValueError
         If the sets are empty, of different ``D``, or hold NaN or Inf.
     """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
+    a = as_array(a).astype(np.float64)
+    b = as_array(b).astype(np.float64)
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or len(a) == 0 or len(b) == 0:
         raise ValueError(f"point sets must be non-empty (N, D) arrays of equal D; got {a.shape} and {b.shape}")
     if not (np.isfinite(a).all() and np.isfinite(b).all()):
