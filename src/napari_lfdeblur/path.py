@@ -259,9 +259,9 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
     (:func:`path_view_mismatch`); they are checked here as they are when
     read. Other values are written as JSON: numpy scalars as numbers,
     tuples and arrays (of up to 4096 elements; larger ones as a short
-    description) as lists, any other object as its ``repr``. The file is written to a temporary name and renamed, so a
-    failure leaves no half-written file. An existing file is kept unless
-    ``overwrite``.
+    description) as lists, any other object as its ``repr``. The file is
+    written to a temporary name and renamed, so a failure leaves no
+    half-written file. An existing file is kept unless ``overwrite``.
 
     Raises
     ------
