@@ -257,11 +257,10 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
     The fields the package reads back are ``n_times``, ``infinity_disparity``
     and ``view_shape``, the ``(Y, X)`` of the views the path belongs to
     (:func:`path_view_mismatch`); they are checked here as they are when
-    read. Other values are written as JSON: numpy scalars as numbers,
-    tuples and arrays (of up to 4096 elements; larger ones as a short
-    description) as lists, any other object as its ``repr``. The file is
-    written to a temporary name and renamed, so a failure leaves no
-    half-written file. An existing file is kept unless ``overwrite``.
+    read. Other values become JSON: numpy scalars numbers, tuples and small
+    arrays lists, other objects their ``repr``. The file is written to a
+    temporary name and renamed, so a failure leaves no half-written file.
+    An existing file is kept unless ``overwrite``.
 
     Raises
     ------
