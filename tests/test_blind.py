@@ -1044,6 +1044,29 @@ def test_tiles_at_a_nonzero_infinity_disparity_meet_without_seams(d_inf):
     assert np.abs(out - ref).max() < 6e-3
 
 
+def test_tiles_at_a_nonzero_infinity_disparity_stay_within_the_plan(monkeypatch):
+    # the plan budgets each tile with 12 px of overlap; d_inf's wider overlap (here 12 + 3 * ceil(2 * 1.4) = 21
+    # px) comes out of the tile, so that no tile with its overlap is larger than the plan's 64 + 2 * 12 px
+    import napari_lfdeblur.deconvolution as deconvolution
+
+    sizes, solve = [], deconvolution.iter_deconvolve
+
+    def recording(arr, *args, **kwargs):
+        sizes.append(arr.shape[2:4])
+        return solve(arr, *args, **kwargs)
+
+    monkeypatch.setattr(deconvolution, "iter_deconvolve", recording)
+    cp = np.array([[-1.0, 0.4, 0.0], [1.0, -0.4, 0.0]])
+    blurred = simulate_blur(_scene((3, 3, 150, 150), seed=6), cp, n_times=8, infinity_disparity=2.0)
+    p = BlindParams().replace(final={"n_iter": 2, "weight": 0.004}, final_n_times=8)
+    info = {}
+    run_to_completion(blind._iter_final(blurred, cp, 2.0, p, torch.device("cpu"), (64, 64), 1, info))
+    assert info["tile"] == (46, 46) and len(sizes) == 16  # 150 px in cores of 46 px: 4 x 4 tiles
+    assert max(max(s) for s in sizes) == 64 + 24 and min(min(s) for s in sizes) == 12 + 21  # the last core is 12 px
+    run_to_completion(blind._iter_final(blurred, cp, 0.0, p, torch.device("cpu"), (64, 64), 1, info))
+    assert info["tile"] == (64, 64)  # at d_inf = 0 the plan's overlap is the overlap
+
+
 def test_max_memory_bounds_the_run_by_tiles_and_is_checked(monkeypatch):
     sharp = _scene((5, 5, 160, 160), seed=6)
     blurred = simulate_blur(sharp, np.array([[-0.6, 0.2, 0.0], [0.5, -0.3, 0.0]]), n_times=16)

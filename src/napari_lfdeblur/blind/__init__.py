@@ -106,7 +106,8 @@ from ._alternating import iter_alternating, relay
 from ._disparity import shear
 from ._evidence import evidence_message, iter_verdict
 from ._joint import iter_joint
-from ._memory import TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tiled_peak, tiles, within
+from ._memory import (TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tile_for_margin, tiled_peak,
+                      tiles, within)
 from ._rotation import iter_rotation_fit
 from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams, RotationFitParams
 from ._windows import check_windows, path_windows, stage_preview
@@ -433,7 +434,9 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path, info):
         # d_inf moves the samples up to r px: near a tile's edge the blur reads clamped pixels over a band of
         # r px that the solve must explain, and its normal operator carries that band 2r px further in
         reach = float(np.abs(bezier_positions(cp, p.final_n_times)).sum(axis=1).max())  # |p_x| + |p_y| + |p_z|
-        parts = list(tiles(Y, X, tile, TILE_MARGIN + 3 * int(math.ceil(abs(d_inf) * reach))))
+        margin = TILE_MARGIN + 3 * int(math.ceil(abs(d_inf) * reach))
+        tile = info["tile"] = tile_for_margin(tile, margin, Y, X)  # each tile with its margin as the plan's
+        parts = list(tiles(Y, X, tile, margin))
         out = np.array(arr, dtype=np.float32)  # restored tile by tile; the rest shows as blurred meanwhile
     for i, (core, pad) in enumerate(parts):
         y0, x0 = pad[0].start or 0, pad[1].start or 0

@@ -11,7 +11,7 @@ from ._params import BlindParams
 from ._region import region_grid
 
 __all__ = ["estimate_blind_memory", "plan_tiles", "plan_run", "tiled_peak", "check_max_memory", "within", "tiles",
-           "TILE_MARGIN", "MIN_TILE", "FINAL_TENSORS"]
+           "tile_for_margin", "TILE_MARGIN", "MIN_TILE", "FINAL_TENSORS"]
 
 #: overlap (px) of neighbouring tiles in the final stage, on top of what ``d_inf`` shifts
 TILE_MARGIN = 12
@@ -171,6 +171,18 @@ def within(free_memory, cap: int | None):
         return cap if free is None else min(free, cap)
 
     return available
+
+
+def tile_for_margin(tile, margin: int, Y: int, X: int) -> tuple[int, int]:
+    """The tile to cut a Y x X image into with ``margin``, so that no tile with it is larger than the plan's.
+
+    :func:`plan_tiles` budgets for ``tile`` plus :data:`TILE_MARGIN` on each
+    side; a wider ``margin`` (the final stage's at ``d_inf != 0``, known once
+    the path is) takes its extra width from the tile, along each axis the
+    tiles split (down to :data:`MIN_TILE`, never up).
+    """
+    extra = max(0, margin - TILE_MARGIN)
+    return tuple(t if t >= n else max(min(t, MIN_TILE), t - 2 * extra) for t, n in zip(tile, (Y, X)))
 
 
 def tiles(Y: int, X: int, tile, margin: int):
