@@ -212,6 +212,7 @@ def test_deblur_takes_each_inputs_stated_infinity_disparity(client, tmp_path):
     assert np.array_equal(read_lightfield(tmp_path / "out" / "half.npz"), want.lightfield)
     rec = read_manifest(tmp_path / "out")["odd.npz"]
     assert rec["status"] == "failed" and "odd.npz states infinity_disparity = 'far'" in rec["error"]
+    assert rec["error"].endswith("give infinity_disparity (--infinity-disparity on the command line)")  # the way out
     # so does `lfdeblur batch deblur` without --infinity-disparity (its help: default each input's own)
     (tmp_path / "tiny.json").write_text(TINY.to_json())
     assert main(["batch", "deblur", str(tmp_path / "in" / "half.npz"), str(tmp_path / "cli"), "--params",

@@ -180,7 +180,7 @@ def item_infinity_disparity(given, meta: dict, name: str) -> float:
     try:
         return check_path_field("infinity_disparity", meta["infinity_disparity"], name)
     except ValueError as exc:
-        raise ValueError(f"{exc}; give infinity_disparity") from None
+        raise ValueError(f"{exc}; give infinity_disparity (--infinity-disparity on the command line)") from None
 
 
 def _deblur(lf, spec: dict, device, meta: dict):
