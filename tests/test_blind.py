@@ -515,6 +515,23 @@ def test_presets_round_trip_through_json(name):
     assert BlindParams.from_dict(json.loads(text)) == p
 
 
+def test_params_from_a_results_metadata_leave_the_runs_settings_out():
+    # a stamp is to_dict's fields beside the run's settings; from a layer's metadata or a file's, saved or read
+    p = BlindParams.preset("paper").replace(n_control_points=5)
+    stamp = {**p.to_dict(), "seed": 3, "device": "cpu", "infinity_disparity": 0.5, "operation": "blind_deblur"}
+    layer_meta = {"kind": "blind", "parameters": stamp, "seed": 3}
+    assert BlindParams.from_metadata(layer_meta) == p
+    assert BlindParams.from_metadata({"layout": "npz", "saved_metadata": layer_meta}) == p  # as a file reads back
+    for bad in ({}, {"parameters": None}, {"saved_metadata": {"kind": "blind"}}, None, "params.json"):
+        with pytest.raises(ValueError, match="needs a result's metadata, with a 'parameters' dict"):
+            BlindParams.from_metadata(bad)
+    cut = {k: v for k, v in stamp.items() if k != "latent"}
+    with pytest.raises(ValueError, match="lack latent"):
+        BlindParams.from_metadata({"parameters": cut})
+    with pytest.raises(ValueError, match="n_control_points"):  # the values are checked as from_dict checks them
+        BlindParams.from_metadata({"parameters": {**stamp, "n_control_points": 1}})
+
+
 def test_nested_params_json_is_nested_and_sub_dicts_merge_onto_the_defaults():
     d = json.loads(BlindParams.preset("paper").to_json())
     assert set(d) >= {"latent", "path", "joint", "final"} and d["joint"]["lr"] == 1.0

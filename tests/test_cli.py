@@ -418,6 +418,7 @@ def test_deblur_motion_reaches_the_params_and_a_6_column_path_is_saved(lf_file, 
     saved = meta["saved_metadata"]
     assert saved["motion"] == (motion or "3dof") and saved["napari_lfdeblur_version"] == napari_lfdeblur.__version__
     assert BlindParams.from_dict(saved["parameters"]) == params and saved["preset"] is None  # --params, no preset
+    assert BlindParams.from_metadata(meta) == BlindParams.from_metadata(saved) == params  # the file's stamp
     # the instants it was restored with (final_n_times, not the path stage's 8), and the seed
     assert saved["n_times"] == json.loads((tmp_path / "o.path.json").read_text())["n_times"] == params.final_n_times
     assert saved["seed"] == 0

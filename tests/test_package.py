@@ -27,7 +27,7 @@ def test_readme_python_api_names_are_top_level():
     bullets = "\n".join(line for line in section.splitlines() if line.startswith(("- ", "  ")))
     public = [m.name for m in pkgutil.iter_modules(napari_lfdeblur.__path__) if not m.name.startswith("_")]
     modules = [importlib.import_module(f"napari_lfdeblur.{m}") for m in public]
-    methods = {"estimate", "from_json", "preset", "replace", "to_json"}  # of BlindParams and Progress
+    methods = {"estimate", "from_json", "from_metadata", "preset", "replace", "to_json"}  # of BlindParams and Progress
     quoted = set(re.findall(r"`([A-Za-z_]\w*)(?:`|\()", bullets)) - methods  # `name` or `name(...)`
     named = {n for n in quoted if any(callable(getattr(m, n, None)) for m in modules)}
     assert len(named) > 20  # the list was found

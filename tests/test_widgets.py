@@ -14,7 +14,9 @@ pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
 import napari_lfdeblur  # noqa: E402
+from napari_lfdeblur.blind import BlindParams  # noqa: E402
 from napari_lfdeblur.blur import simulate_blur  # noqa: E402
+from napari_lfdeblur.deconvolution import DeconvolutionParams  # noqa: E402
 from napari_lfdeblur.path import bezier_positions  # noqa: E402
 from conftest import wrap_prox_inner_iteration  # noqa: E402
 
@@ -336,6 +338,11 @@ def test_deconvolve_tv_with_path_from_path_layer(make_napari_viewer, qtbot, lf, 
     np.testing.assert_allclose(out, ref, atol=1e-5)
     params = viewer.layers["b deconvolved"].metadata["parameters"]
     assert params["weight"] is None and params["noise_sigma"] > 0
+    stamped = DeconvolutionParams.from_metadata(viewer.layers["b deconvolved"].metadata)  # a preset again
+    assert (stamped.method, stamped.weight, stamped.n_iter) == ("tv", None, 5)  # the rule, not its choice
+    np.testing.assert_allclose(deconvolve(blurred, cp, n_times=6, params=stamped), out, atol=1e-6)
+    with pytest.raises(ValueError, match="not BlindParams's: they lack"):  # another solver's stamp
+        BlindParams.from_metadata(viewer.layers["b deconvolved"].metadata)
     # the weight the rule chose is kept: given back, it restores the same light field
     np.testing.assert_allclose(deconvolve(blurred, cp, n_times=6, method="tv", weight=params["weight_used"], n_iter=5),
                                out, atol=1e-6)
@@ -641,6 +648,7 @@ def test_blind_end_to_end(make_napari_viewer, qtbot, lf, notifications, via_menu
     assert w.preview_updates >= 1 and w.path_preview_updates >= 1  # live previews were shown (then removed)
     assert meta["parameters"]["n_control_points"] == 3 and meta["parameters"]["final"]["n_iter"] == 3
     assert meta["parameters"]["latent"]["edge_anisotropy"] == pytest.approx(0.3)
+    assert BlindParams.from_metadata(meta) == res.params  # the stamp is a preset: the run's parameters again
     np.testing.assert_array_equal(layer.data, before)
 
 
@@ -1262,7 +1270,6 @@ def test_widgets_follow_an_input_updated_in_place_and_record_every_parameter(mak
     # a re-run of Simulate blur updates its result layer in place: the deconvolution widget, with that layer
     # chosen, takes the new path, T and d_inf (it kept the first run's and deconvolved with them)
     from napari_lfdeblur._napari.widgets import DeconvolveWidget, SimulateBlurWidget
-    from napari_lfdeblur.deconvolution import DeconvolutionParams
     from napari_lfdeblur.path import arc_path
 
     viewer = make_napari_viewer()

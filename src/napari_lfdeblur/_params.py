@@ -138,6 +138,35 @@ class JsonParams:
         return json.dumps(self.to_dict(), indent=2)
 
     @classmethod
+    def from_metadata(cls, metadata: dict):
+        """The parameters a result was made with, from its metadata.
+
+        ``metadata`` is a result layer's ``metadata`` in napari, a result
+        file's (``read_lightfield_with_metadata(path)[1]``, which holds it
+        under ``'saved_metadata'``), or that saved dict itself. Its
+        ``'parameters'`` stamp holds every field, as :meth:`to_dict` writes
+        them, next to the run's settings (seed, device, ``d_inf``, the
+        weight used, ...), which are left out here: pass them to the solver
+        as they are.
+
+        Raises
+        ------
+        ValueError
+            When there is no ``'parameters'`` dict, or it lacks a field (it
+            is another solver's), or a value is invalid.
+        """
+        if isinstance(metadata, dict) and "parameters" not in metadata:
+            metadata = metadata.get("saved_metadata")
+        stamp = metadata.get("parameters") if isinstance(metadata, dict) else None
+        if not isinstance(stamp, dict):
+            raise ValueError(f"{cls.__name__}.from_metadata needs a result's metadata, with a 'parameters' dict")
+        names = [f.name for f in fields(cls)]
+        missing = [n for n in names if n not in stamp]
+        if missing:
+            raise ValueError(f"the metadata's parameters are not {cls.__name__}'s: they lack {', '.join(missing)}")
+        return cls.from_dict({n: stamp[n] for n in names})
+
+    @classmethod
     def from_json(cls, text: str):
         """Parameters from a JSON text written by :meth:`to_json` (a ValueError on bad text)."""
         try:

@@ -14,7 +14,9 @@ Light field
 
         'napari_lfdeblur_version'  the package version that made it
         'kind'                     'blurred', 'deconvolved', 'blind', 'preview', ...
-        'parameters'               dict of the parameters of the operation
+        'parameters'               dict of the parameters of the operation: the
+                                   solver's dataclass fields (``from_metadata``
+                                   reads them back) and the run's settings
         'control_points'           list of [p_x, p_y, p_z] (the path used / found),
                                    or [p_x, p_y, p_z, r_x, r_y, r_z] with rotation
         'n_times', 'infinity_disparity', 'source_layer'
