@@ -935,6 +935,23 @@ def test_stack_of_views_with_grid_option(tmp_path, lf_rgb):
         read_lightfield(tmp_path / "g.npy", grid=(3, 3))
 
 
+@pytest.mark.parametrize("suffix", ["npy", "npz"])
+def test_array_stack_of_colour_images_is_refused_unless_its_layout_is_given(tmp_path, suffix):
+    # an (N, H, W, 3) array has no axes to say what it is; read as (V, U, Y, X) its views would be 3 px wide
+    lf = np.random.default_rng(0).random((3, 4, 16, 20, 3)).astype(np.float32)
+    stack = lf.reshape(12, 16, 20, 3)
+    f = tmp_path / f"stack.{suffix}"
+    np.save(f, stack) if suffix == "npy" else np.savez(f, lf=stack)
+    with pytest.raises(LightFieldFormatError, match=r"a stack of 12 colour images of 16x20 rather than a light "
+                                                    r"field of 20x3 px views; pass grid=\(V, U\)"):
+        read_lightfield(f)
+    assert probe_layout(f) is None  # napari's own reader opens it as a stack
+    np.testing.assert_array_equal(read_lightfield(f, grid=(3, 4)), lf)
+    assert read_lightfield(f, axes="vuyx").shape == (12, 16, 20, 3)  # read as it is, when asked
+    np.save(tmp_path / "narrow.npy", lf[:, :, :11, :3, 0])  # views 3 px wide, under four times as tall
+    assert probe_layout(tmp_path / "narrow.npy") == "npy" and read_lightfield(tmp_path / "narrow.npy").shape[3] == 3
+
+
 # ------------------------------------------------------------------ angular crop
 
 

@@ -175,11 +175,12 @@ def probe_layout(path) -> str | None:
 
             return layout if npy_may_be_lightfield(p) else None
         if layout == "npz":
-            from ._arrays import npz_headers, npz_lightfield_key
+            from ._arrays import looks_like_image_stack, npz_headers, npz_lightfield_key
 
             headers = npz_headers(p)
             key = npz_lightfield_key(p, headers)
-            return layout if key is not None and len(headers[key][0]) in (4, 5) else None
+            shape = headers[key][0] if key is not None else ()
+            return layout if len(shape) in (4, 5) and not looks_like_image_stack(shape) else None
         if layout == "tiff":
             from ._arrays import tiff_shape
 

@@ -114,6 +114,23 @@ def _shape_error(shape, path, what="the array", grid=None):
         )
 
 
+def looks_like_image_stack(shape) -> bool:
+    """Whether a 4D array without stated axes is a stack of colour images ``(N, H, W, 3 or 4)`` rather than a
+    light field: read as ``(V, U, Y, X)`` its views would be 3 or 4 px wide and at least four times as tall."""
+    return len(shape) == 4 and shape[3] in (3, 4) and shape[2] >= 4 * shape[3]
+
+
+def _image_stack_error(shape, path, what, axes, grid):
+    """Refuse a stack of colour images (:func:`looks_like_image_stack`) unless ``axes`` or ``grid`` says how to
+    read it."""
+    if axes is None and grid is None and looks_like_image_stack(shape):
+        raise LightFieldFormatError(
+            f"{path}: {what} has shape {tuple(shape)}, a stack of {shape[0]} colour images of {shape[1]}x{shape[2]} "
+            f"rather than a light field of {shape[2]}x{shape[3]} px views; pass grid=(V, U) to arrange the images "
+            f"as a V x U light field (or axes='vuyx' to read it as it is)"
+        )
+
+
 # ------------------------------------------------------------------ .npy / .npz
 
 
@@ -137,7 +154,7 @@ def npy_may_be_lightfield(path) -> bool:
     """Whether a .npy file's header describes a light field the reader can take: 4D or 5D, not empty, of
     numbers (not complex or objects), with all its data in the file (not truncated)."""
     shape, dtype, offset = _npy_header(path)
-    return (len(shape) in (4, 5) and min(shape) > 0 and dtype.kind in "biuf"
+    return (len(shape) in (4, 5) and min(shape) > 0 and not looks_like_image_stack(shape) and dtype.kind in "biuf"
             and Path(path).stat().st_size >= offset + int(np.prod(shape)) * dtype.itemsize)
 
 
@@ -148,6 +165,7 @@ def read_npy(path, *, axes=None, grid=None, value_range=None, max_bytes=None, an
     except Exception as exc:  # noqa: BLE001
         raise LightFieldReadError(f"{path}: not a readable .npy file ({type(exc).__name__}: {exc})") from None
     _shape_error(shape, path, grid=grid)
+    _image_stack_error(shape, path, "the array", axes, grid)
     meta: dict = {"layout": "npy"}
     index, read, grid = kept_views(shape, axes, grid, angular_crop, path, meta)
     check_memory(read, dtype.itemsize, path, max_bytes=max_bytes)  # a memory map reads only the kept views
@@ -221,6 +239,7 @@ def read_npz(path, *, key=None, axes=None, grid=None, value_range=None, max_byte
         raise LightFieldFormatError(f"{path}: no array {key!r} (found {sorted(headers)})")
     shape, dtype = headers[key]
     _shape_error(shape, path, f"array {key!r}", grid)
+    _image_stack_error(shape, path, f"array {key!r}", axes, grid)
     meta: dict = {"layout": "npz", "key": key}
     index, read, grid = kept_views(shape, axes, grid, angular_crop, path, meta)
     check_memory(shape, dtype.itemsize, path, max_bytes=max_bytes, out_shape=read)  # read whole
