@@ -210,6 +210,8 @@ def test_deblur_takes_each_inputs_stated_infinity_disparity(client, tmp_path):
     want = _serial(lambda: blind_deblur(lf, params=TINY, infinity_disparity=0.5, device="cpu",
                                         seed=item_seed(0, "half.npz", 0)))
     assert np.array_equal(read_lightfield(tmp_path / "out" / "half.npz"), want.lightfield)
+    # the parameters it ran with come back from the output file, as from any result's
+    assert BlindParams.from_metadata(read_lightfield_with_metadata(tmp_path / "out" / "half.npz")[1]) == TINY
     rec = read_manifest(tmp_path / "out")["odd.npz"]
     assert rec["status"] == "failed" and "odd.npz states infinity_disparity = 'far'" in rec["error"]
     assert rec["error"].endswith("give infinity_disparity (--infinity-disparity on the command line)")  # the way out

@@ -143,11 +143,11 @@ class JsonParams:
 
         ``metadata`` is a result layer's ``metadata`` in napari, a result
         file's (``read_lightfield_with_metadata(path)[1]``, which holds it
-        under ``'saved_metadata'``), or that saved dict itself. Its
-        ``'parameters'`` stamp holds every field, as :meth:`to_dict` writes
-        them, next to the run's settings (seed, device, ``d_inf``, the
-        weight used, ...), which are left out here: pass them to the solver
-        as they are.
+        under ``'saved_metadata'``; a batch run's item too), or that saved
+        dict itself. Its ``'parameters'`` stamp holds every field, as
+        :meth:`to_dict` writes them, next to the run's settings (seed,
+        device, ``d_inf``, the weight used, ...), which are left out here:
+        pass them to the solver as they are.
 
         Raises
         ------
@@ -156,7 +156,9 @@ class JsonParams:
             is another solver's), or a value is invalid.
         """
         if isinstance(metadata, dict) and "parameters" not in metadata:
-            metadata = metadata.get("saved_metadata")
+            metadata = metadata.get("saved_metadata", metadata)  # a file's, as read back
+        if isinstance(metadata, dict) and "parameters" not in metadata and isinstance(metadata.get("batch"), dict):
+            metadata = {"parameters": (metadata["batch"].get("parameters") or {}).get("params")}  # a batch item's
         stamp = metadata.get("parameters") if isinstance(metadata, dict) else None
         if not isinstance(stamp, dict):
             raise ValueError(f"{cls.__name__}.from_metadata needs a result's metadata, with a 'parameters' dict")
