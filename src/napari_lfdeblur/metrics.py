@@ -105,24 +105,29 @@ def psnr(estimate, reference, *, data_range: float | None = None, crop: int = 0)
     float
         The PSNR over all views, pixels and channels; ``inf`` when they are equal.
     """
-    data_range = _data_range(data_range, estimate, reference)
-    est, ref = _pair(estimate, reference, crop)
+    est, ref, data_range = _ranged_pair(estimate, reference, crop, data_range)
     mse = float(np.mean((est - ref) ** 2))
     if mse == 0.0:
         return float("inf")
     return float(10.0 * np.log10(float(data_range) ** 2 / mse))
 
 
-def _data_range(value, estimate, reference) -> float:
+def _ranged_pair(estimate, reference, crop, data_range):
+    """:func:`_pair`'s arrays and :func:`_data_range`'s range, the inputs read once (a tensor is copied once)."""
+    estimate, reference = as_array(estimate), as_array(reference)
+    value = _data_range(data_range, estimate.dtype, reference.dtype)
+    return (*_pair(estimate, reference, crop), value)
+
+
+def _data_range(value, est_dtype, ref_dtype) -> float:
     """``data_range`` as a positive float (TypeError for a non-number, ValueError when not positive).
 
-    None: the top of the inputs' range (:func:`white_level` of their dtype), when they agree on it.
+    None: the top of the inputs' range (:func:`white_level` of their dtypes), when they agree on it.
     """
     if value is None:
-        dtypes = [as_array(a).dtype for a in (estimate, reference)]
-        levels = {white_level(d) for d in dtypes}
+        levels = {white_level(d) for d in (est_dtype, ref_dtype)}
         if len(levels) > 1:
-            raise ValueError(f"estimate ({dtypes[0]}) and reference ({dtypes[1]}) have different ranges: "
+            raise ValueError(f"estimate ({est_dtype}) and reference ({ref_dtype}) have different ranges: "
                              "give data_range")
         return levels.pop()
     value = check_number(value, "data_range")
@@ -155,8 +160,7 @@ def ssim(estimate, reference, *, data_range: float | None = None, crop: int = 0)
     """
     from skimage.metrics import structural_similarity
 
-    data_range = _data_range(data_range, estimate, reference)
-    est, ref = _pair(estimate, reference, crop)
+    est, ref, data_range = _ranged_pair(estimate, reference, crop, data_range)
     ay, ax = _spatial_axes(est.ndim)
     win = min(7, est.shape[ay], est.shape[ax])
     win -= 1 - win % 2  # odd
