@@ -183,6 +183,26 @@ def test_views_jpeg(tmp_path, lf_rgb):
     np.testing.assert_allclose(out[1, 2], ref, atol=1e-6)
 
 
+def test_views_jpeg_cmyk(tmp_path, lf_rgb):
+    """CMYK JPEG views are read as RGB (Pillow's conversion), not as RGBA of their ink amounts."""
+    from PIL import Image
+
+    folder = tmp_path / "cmyk"
+    folder.mkdir()
+    lf8 = _u8(lf_rgb)
+    for r in range(V):
+        for c in range(U):
+            Image.fromarray(lf8[r, c]).convert("CMYK").save(folder / f"v_{r + 1}_{c + 1}.jpg", quality=95)
+    out = read_lightfield(folder)
+    assert out.shape == lf8.shape
+    with Image.open(folder / "v_2_3.jpg") as im:
+        assert im.mode == "CMYK"
+        ref = np.asarray(im.convert("RGB")).astype(np.float32) / 255
+    np.testing.assert_allclose(out[1, 2], ref, atol=1e-6)
+    # the colours are the views' own, up to JPEG's loss (the ink amounts read as RGB are far off)
+    assert np.abs(out - lf8 / 255).mean() < 0.05
+
+
 def _hci_views(folder, lf8):
     """Write the views of ``lf8`` (V, U, Y, X, C) as HCI's input_CamNNN.png, row-major."""
     folder.mkdir()

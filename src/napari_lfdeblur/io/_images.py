@@ -75,8 +75,22 @@ def image_props(path) -> tuple[tuple[int, ...], np.dtype]:
     return (h, w) + ((c,) if c > 1 else ()), np.dtype(dtype)
 
 
+def _pil_mode(path) -> str | None:
+    """Pillow's mode of the image at ``path`` (its header only), or None where Pillow cannot open it."""
+    try:
+        from PIL import Image
+
+        with Image.open(path) as im:
+            return im.mode
+    except Exception:  # noqa: BLE001 - any reader failure: not Pillow's image
+        return None
+
+
 def read_image(path) -> np.ndarray:
     """Decode one image to its native dtype, shape (H, W) or (H, W, C).
+
+    A CMYK image (a JPEG from print workflows) comes back as RGB, converted
+    as Pillow converts it.
 
     Raises
     ------
@@ -102,6 +116,8 @@ def read_image(path) -> np.ndarray:
                 # called from worker threads: no warnings.catch_warnings here, whose save and
                 # restore of the process-wide filters is not thread-safe
                 img = iio.imread(path)
+                if np.ndim(img) == 3 and np.shape(img)[2] == 4 and _pil_mode(path) == "CMYK":
+                    img = iio.imread(path, mode="RGB")  # ink amounts, not RGBA: Pillow's conversion
     except (PNGError, Exception) as exc:  # noqa: BLE001 - any decoder failure
         if isinstance(exc, FileNotFoundError):
             raise
