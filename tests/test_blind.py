@@ -671,6 +671,10 @@ def test_bad_input_gives_clear_errors():
         with pytest.raises(ValueError, match="final.method='inplane'"):
             iter_blind_deblur(good, params=p, infinity_disparity=d_inf)
     iter_blind_deblur(good, params=inplane.replace(path={"estimate_z": False})).close()
+    # "no" is a true value: taken as given, it ran the check it was meant to switch off
+    for flag in ("no", 0, None):
+        with pytest.raises(TypeError, match="check_view_order must be True or False"):
+            iter_blind_deblur(good, check_view_order=flag)
 
 
 def test_a_light_field_on_another_scale_is_refused_not_returned_unchanged():

@@ -206,6 +206,9 @@ def test_operator_rejects_wrong_shape():
     assert to_tensor(np.zeros((3, 3, 4, 4))).shape == (3, 3, 4, 4, 1)
     with pytest.raises(ValueError, match="whole numbers"):  # not truncated to (3, 3, 4, 4)
         BlurOperator((3.7, 3, 4, 4), [[0, 0, 0], [1, 0, 0]], n_times=3, device="cpu")
+    for bad in (0, -5, 2.5, True):  # taken as it was, a block of no memory
+        with pytest.raises(ValueError, match="block_elements must be a whole number >= 1"):
+            BlurOperator((3, 3, 4, 4), [[0, 0, 0], [1, 0, 0]], n_times=3, device="cpu", block_elements=bad)
 
 
 def test_in_plane_blur_is_one_angular_matrix_per_pixel():

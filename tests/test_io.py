@@ -688,6 +688,8 @@ def test_writer_rejects_bad_arrays(tmp_path, lf_gray):
         write_lightfield(tmp_path / "a.npz", bad)
     with pytest.raises(ValueError, match="PNG"):
         write_lightfield(tmp_path / "v", lf_gray, bit_depth=32)
+    with pytest.raises(TypeError, match="metadata must be a dict"):
+        write_lightfield(tmp_path / "a.npz", lf_gray, metadata=[("source", "x")])
     assert list(tmp_path.iterdir()) == []
 
 

@@ -57,6 +57,11 @@ def test_psnr_and_ssim_reject_bad_input():
         psnr(np.zeros((1,) * 6), np.zeros((1,) * 6))
     with pytest.raises(ValueError, match="give data_range"):  # integer against float: which range?
         psnr(a.astype(np.uint8), a)
+    for metric in (psnr, ssim, angular_error):  # no samples: refused, not NaN
+        with pytest.raises(ValueError, match="empty"):
+            metric(np.zeros((0, 3, 8, 8)), np.zeros((0, 3, 8, 8)))
+    with pytest.raises(ValueError, match="different ranges"):  # 0..255 against 0..1 (it has no data_range)
+        angular_error(a.astype(np.uint8), a)
     for metric in (psnr, ssim):  # a string was compared with 0 ('>' not supported)
         with pytest.raises(TypeError, match="data_range must be a number; got '1'"):
             metric(a, a + 0.1, data_range="1")
@@ -226,6 +231,7 @@ def test_integer_inputs_are_scored_on_their_dtypes_range():
     assert psnr(est, ref) == pytest.approx(psnr(est / 255.0, ref / 255.0))
     assert ssim(est, ref) == pytest.approx(ssim(est / 255.0, ref / 255.0))
     assert ssim(est, ref) == pytest.approx(_ssim_brute(est, ref, 255.0), abs=1e-9)
+    assert angular_error(est, ref) == pytest.approx(255.0 * angular_error(est / 255.0, ref / 255.0))
     wide = ref.astype(np.uint16)
     assert psnr(wide, wide + 1) == pytest.approx(10 * np.log10(65535.0**2))
 

@@ -316,6 +316,10 @@ def test_path_view_mismatch_speaks_exactly_when_the_blur_changes_on_other_views(
     cp6[:, 2] = 0.0
     assert "its rotation" in path_view_mismatch(cp6, (8, 10), (12, 20))
     assert "cannot be moved" in path_view_mismatch(cp6, (8, 10), (12, 20))
+    # shapes that are not (Y, X): named (it failed unpacking them)
+    for shape, stated in (((16,), (12, 20)), ((8, 10), (12, 20, 3))):
+        with pytest.raises(ValueError, match="view_shape must be"):
+            path_view_mismatch(with_pz, shape, stated)
 
 
 def test_save_path_json_checks_the_view_shape(tmp_path):

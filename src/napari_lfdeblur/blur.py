@@ -327,6 +327,8 @@ class BlurOperator:
         self.control_points = cp
         if block_elements is None:
             block_elements = DEFAULT_BLOCK_ELEMENTS.get(self.device.type, DEFAULT_BLOCK_ELEMENTS["cpu"])
+        if isinstance(block_elements, bool) or not isinstance(block_elements, (int, np.integer)) or block_elements < 1:
+            raise ValueError(f"block_elements must be a whole number >= 1; got {block_elements!r}")
         self.block_elements = int(block_elements)
         self.positions = bezier_positions(cp, self.n_times)  # refuses NaN or Inf in a tensor
         V, U = self.shape[:2]

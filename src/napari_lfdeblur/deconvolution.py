@@ -473,8 +473,11 @@ def deconvolve(
     ValueError
         On a malformed light field or path, mismatched shapes, NaN, an
         infinity disparity beyond the views' size, a negative weight, an
-        unknown method or kind of angular differences, or ``'inplane'`` for
-        a path that is not in-plane.
+        unknown method or kind of angular differences, ``'inplane'`` for
+        a path that is not in-plane, or a ``params`` dict with keys that are
+        not fields.
+    TypeError
+        On an unknown keyword argument, or ``params`` of another type.
 
     Examples
     --------

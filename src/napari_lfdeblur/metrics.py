@@ -67,6 +67,8 @@ def _pair(estimate, reference, crop) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"the {name} must hold real numbers; got dtype {arr.dtype}")
     if est.shape != ref.shape:
         raise ValueError(f"estimate and reference shapes differ: {est.shape} vs {ref.shape}")
+    if est.size == 0:
+        raise ValueError(f"estimate and reference are empty (shape {est.shape})")
     ay, ax = _spatial_axes(est.ndim)
     if isinstance(crop, bool) or not isinstance(crop, (int, np.integer)) or crop < 0:
         raise ValueError(f"crop must be a non-negative integer; got {crop!r}")
@@ -207,7 +209,18 @@ def angular_error(estimate, reference, *, crop: int = 0) -> float:
     Returns
     -------
     float
+        In the inputs' units (0..255 for two ``uint8`` light fields).
+
+    Raises
+    ------
+    ValueError
+        For inputs of different shapes, empty ones, NaN or Inf, one light
+        view, or dtypes of different ranges (integers against floats).
     """
+    estimate, reference = as_array(estimate), as_array(reference)
+    if white_level(estimate.dtype) != white_level(reference.dtype):
+        raise ValueError(f"estimate ({estimate.dtype}) and reference ({reference.dtype}) have different ranges: "
+                         "convert one to the other's (for example, integers to 0..1 floats)")
     est, ref = _pair(estimate, reference, crop)
     if est.ndim not in (4, 5):
         raise ValueError(f"angular_error needs light fields (V, U, Y, X[, C]); got {est.ndim}D arrays")

@@ -451,6 +451,11 @@ def path_view_mismatch(control_points, view_shape, stated_view_shape) -> str | N
         A sentence for people, or None when the sizes agree, are not known,
         or the path has neither ``p_z`` nor a rotation.
 
+    Raises
+    ------
+    ValueError
+        On malformed control points, or shapes that are not ``(Y, X)``.
+
     Examples
     --------
     >>> path_view_mismatch([[0, 0, 0.5], [1, 0, -0.5]], (128, 128), (376, 541)) is not None
@@ -461,6 +466,9 @@ def path_view_mismatch(control_points, view_shape, stated_view_shape) -> str | N
     cp = validate_control_points(control_points)
     shape = tuple(int(s) for s in view_shape)
     shape = shape[2:4] if len(shape) >= 4 else shape
+    for name, value in (("view_shape", shape), ("stated_view_shape", stated_view_shape)):
+        if value is not None and len(tuple(value)) != 2:
+            raise ValueError(f"{name} must be (Y, X) (or a light field's shape for view_shape); got {value!r}")
     if stated_view_shape is None or tuple(stated_view_shape) == shape:
         return None
     rotation = has_rotation(cp)

@@ -213,9 +213,11 @@ def blind_deblur(
         ``infinity_disparity`` that is not finite, beyond the views or
         ``'auto'``, or ``windows`` that are malformed, too small, reach
         outside the views, overlap or are more than one where only one is
-        taken.
+        taken; a ``params`` dict with keys that are not fields (as
+        :meth:`BlindParams.from_dict`).
     TypeError
-        On an unknown keyword or parameter of the wrong type.
+        On an unknown keyword argument (a field override, as
+        :meth:`BlindParams.replace`) or a parameter of the wrong type.
     """
     gen = iter_blind_deblur(blurred, params=params, infinity_disparity=infinity_disparity, device=device,
                             seed=seed, max_memory=max_memory, windows=windows,
@@ -278,6 +280,8 @@ def iter_blind_deblur(
     """
     arr, d_inf = _validate_input(blurred, infinity_disparity)
     p = _make_params(params, overrides)
+    if not isinstance(check_view_order, (bool, np.bool_)):
+        raise TypeError(f"check_view_order must be True or False; got {check_view_order!r}")
     in_plane = d_inf == 0 and p.method == "alternating" and p.motion == "3dof" and not p.path.estimate_z
     if p.final is not None and p.final.method == "inplane" and not in_plane:  # it would fail after the path stage
         raise ValueError("final.method='inplane' restores in-plane paths at infinity_disparity 0 only, and this run "

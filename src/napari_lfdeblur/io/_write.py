@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import re
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -409,6 +410,8 @@ def write_lightfield(
         If ``lf`` is not a light field or contains NaN/Inf, the format
         cannot be told from the suffix, or it has 2 channels and the format
         is an image (views, mosaic, ESLF: images hold 1, 3 or 4 channels).
+    TypeError
+        If ``metadata`` is not a mapping.
     ValueError
         On an unknown ``layout`` or ``bit_depth``, ``bit_depth=32`` for PNG,
         or, with ``control_points``, ``n_times`` or ``infinity_disparity`` in
@@ -429,6 +432,8 @@ def write_lightfield(
         from ..path import validate_control_points
 
         cp = validate_control_points(control_points)
+    if metadata is not None and not isinstance(metadata, Mapping):
+        raise TypeError(f"metadata must be a dict (or None); got {type(metadata).__name__}")
     # the array's own axes and shape win over those of metadata passed along from another light field
     meta = jsonable({**(metadata or {}), "axes": "vuyxc"[: arr.ndim], "shape": list(arr.shape)})
     if cp is not None:
