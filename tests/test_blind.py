@@ -357,6 +357,16 @@ def test_estimated_paths_stay_in_range_on_flat_scene():
     np.testing.assert_array_equal(res.lightfield, lf)
 
 
+def test_a_constant_light_field_is_returned_with_a_sane_verdict():
+    lf = np.full((3, 3, 16, 16), 0.5, np.float32)
+    res = blind_deblur(lf, device="cpu", seed=0)
+    np.testing.assert_array_equal(res.lightfield, lf)
+    e = res.info["evidence"]
+    # "no blur" costs nothing here: no relative gain (it was -6e16, rounding over 1e-30), none found
+    assert e["relative"] == 0.0 and not e["blur_found"]
+    assert "by 0.0 %" in res.info["message"]
+
+
 def test_infinity_disparity_runs_and_keeps_shape():
     lf = _scene((5, 5, 20, 20), seed=2)[..., None].repeat(3, axis=-1)
     blurred = simulate_blur(lf, linear_path(1.0), n_times=8, infinity_disparity=0.5)
@@ -656,6 +666,11 @@ def test_bad_input_gives_clear_errors():
         LatentParams(edge_anisotropy="wide")
     with pytest.raises(ValueError, match="edge_sigma_from"):
         LatentParams(edge_sigma_from=0)
+    # a Gaussian of 3 sigma per side: 1e9 px asked for tens of GB (the process was killed)
+    for field, value in (("edge_sigma", 5.5), ("edge_anisotropy", -1e9)):
+        with pytest.raises(ValueError, match=f"latent.{field} must be within 5 px"):
+            LatentParams(**{field: value})
+    LatentParams(edge_sigma=5.0, edge_anisotropy=-5.0)
     with pytest.raises(ValueError, match="disparity_weight"):
         PathFitParams(disparity_weight=-1.0)
     with pytest.raises(ValueError, match="rotation.warm_hqs_steps"):

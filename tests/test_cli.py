@@ -653,6 +653,45 @@ def test_bad_seeds_paths_and_output_folders_get_one_line(lf_file, tmp_path, caps
     assert "afile is a file" in capsys.readouterr().err and (tmp_path / "afile").read_text() == "mine"
 
 
+def test_a_folder_that_takes_no_file_is_refused_before_the_work(lf_file, tmp_path, capsys, monkeypatch):
+    """A read-only output folder (here: one whose files cannot be created) was found after the whole run, and
+    --path-out's after the light field was written, which a rerun then refused to replace."""
+    import pathlib
+
+    _, src = lf_file
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    touch = pathlib.Path.touch
+
+    def refuse_in_locked(self, *args, **kwargs):
+        if self.parent == locked:
+            raise PermissionError(13, "Permission denied", str(self))
+        return touch(self, *args, **kwargs)
+
+    def never(*args, **kwargs):
+        raise AssertionError("the blind solver ran")
+
+    monkeypatch.setattr(pathlib.Path, "touch", refuse_in_locked)
+    monkeypatch.setattr(napari_lfdeblur.blind, "iter_blind_deblur", never)
+    for extra in ([str(locked / "d.npz")], [str(tmp_path / "d.npz"), "--path-out", str(locked / "p.json")]):
+        assert main(["deblur", str(src), *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "the folder" in err and "takes no new file (Permission denied)" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lf.npy", "locked"]  # nothing written
+
+
+def test_library_hints_are_given_as_options(lf_file, tmp_path, capsys):
+    _, src = lf_file
+    assert main(["info", str(src), "--angular-size", "4"]) == 2  # a reader option the layout does not take
+    err = capsys.readouterr().err
+    assert "error: --angular-size does not apply to layout 'npy' (its options: --grid, --value-range, " in err
+    assert "angular_size" not in err and "max_bytes" not in err
+    np.save(tmp_path / "thin.npy", np.random.default_rng(0).random((3, 3, 1, 8)).astype(np.float32))
+    save_path_json(tmp_path / "p.json", linear_path(1.0))
+    assert main(["deconvolve", str(tmp_path / "thin.npy"), str(tmp_path / "p.json"), str(tmp_path / "t.npz")]) == 2
+    assert capsys.readouterr().err.rstrip().endswith("(2 x 2 at least): pass --weight W")
+
+
 def test_a_file_whose_own_path_is_malformed_is_read_with_a_warning(tmp_path, capsys):
     lf = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
     np.savez(tmp_path / "badcp.npz", lf=lf, control_points=np.zeros((2, 2)))

@@ -1111,6 +1111,11 @@ def test_twelve_bit_values_in_a_sixteen_bit_file(tmp_path, lf_gray):
     lf, meta = read_lightfield_with_metadata(tmp_path / "raw.tif", value_range="auto")
     np.testing.assert_allclose(lf, (raw - raw.min()) / (raw.max() - raw.min()), atol=1e-6)
     assert meta["value_range"] == "auto"
+    # constant data has no range to stretch: read as 0, and said (it turned black without a word)
+    tifffile.imwrite(tmp_path / "flat.tif", np.full_like(raw, 700))
+    with pytest.warns(UserWarning, match="every value is 700, so value_range='auto' has no range"):
+        lf = read_lightfield(tmp_path / "flat.tif", value_range="auto")
+    assert lf.shape == raw.shape and not lf.any()
 
 
 def test_cli_value_range_and_the_dark_note(tmp_path, lf_rgb, capsys):

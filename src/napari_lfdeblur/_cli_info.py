@@ -5,8 +5,10 @@ stores with a light field it computed."""
 from __future__ import annotations
 
 import json
+import os
 import re
 import sys
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -233,16 +235,41 @@ def check_targets(targets, overwrite: bool, inputs=()) -> None:
             raise CLIError(f"{target} exists; pass --overwrite to replace it")  # the option's name, not the API's
         if target.parent not in targets:
             check_writable(target, overwrite=True)  # its folder exists
+            _check_folder_takes_files(target)
+
+
+def _check_folder_takes_files(target: Path) -> None:
+    """Refuse, before any work, an output whose folder exists but takes no new file (read-only, or not ours),
+    found by creating a file there and removing it (permission bits do not tell root's refusals)."""
+    probe = target.parent / f".lfdeblur-probe-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        probe.touch(exist_ok=False)
+    except OSError as exc:
+        raise CLIError(f"cannot write {target}: the folder {target.parent} takes no new file "
+                       f"({exc.strerror or exc})") from None
+    probe.unlink()
 
 
 #: the library's hints in Python keywords, and their command-line spelling
 _HINTS = ((re.compile(r"grid=\(V, U\)"), "--grid V,U"), (re.compile(r"layout='(\w+)'"), r"--layout \1"),
           (re.compile(r"device='(\w+)' or '(\w+)'"), r"--device \1 or \2"),
-          (re.compile(r", or pass layout= \(one of \([^)]*\)\)"), ""))  # an output's layout is its suffix here
+          (re.compile(r", or pass layout= \(one of \([^)]*\)\)"), ""),  # an output's layout is its suffix here
+          (re.compile(r"pass weight=$"), "pass --weight W"))
+#: the reader's refusal of options a layout does not take, in Python keywords
+_READER_OPTIONS = re.compile(r"option\(s\) \[(.*)\] do not apply to layout '(\w+)'; it accepts \[(.*)\] plus .*")
 
 
 def in_cli_words(message: str) -> str:
     """An error message of the library with its keyword hints (``grid=(V, U)``, ``device='cpu'``) as options."""
     for pattern, words in _HINTS:
         message = pattern.sub(words, message)
+    found = _READER_OPTIONS.fullmatch(message)
+    if found:  # the commands take two of the reader's options: --grid and --angular-size
+        def spelt(names):
+            return ["--" + n.strip(" '").replace("_", "-") for n in names.split(",")
+                    if n.strip(" '") in ("grid", "angular_size")]
+
+        taken = ", ".join(spelt(found.group(3)) + ["--value-range", "--angular-crop"])
+        message = (f"{', '.join(spelt(found.group(1)))} does not apply to layout {found.group(2)!r} "
+                   f"(its options: {taken})")
     return message

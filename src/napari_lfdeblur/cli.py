@@ -264,6 +264,8 @@ def _run_deblur(args):
 
     try:
         result = run_to_completion(gen, show)
+        bar.n = bar.total  # done: stages the run skipped (a final solve on no blur) leave no gap
+        bar.refresh()
     finally:
         gen.close()
         bar.close()

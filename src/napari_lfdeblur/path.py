@@ -33,29 +33,10 @@ from ._bezier import (
 from ._lightfield import check_seed
 
 __all__ = [
-    "MAX_ROTATION",
-    "has_rotation",
-    "path_in_frame",
-    "path_in_window",
-    "path_view_mismatch",
-    "validate_control_points",
-    "validate_n_times",
-    "sample_times",
-    "bernstein_matrix",
-    "bezier_positions",
-    "center_path",
-    "elevate_degree",
-    "canonical_time_direction",
-    "linear_path",
-    "arc_path",
-    "shake_path",
-    "shake6_path",
-    "random_path",
-    "preset_path",
-    "PRESETS",
-    "save_path_json",
-    "load_path_json",
-    "read_path_json",
+    "MAX_ROTATION", "has_rotation", "path_in_frame", "path_in_window", "path_view_mismatch",
+    "validate_control_points", "validate_n_times", "sample_times", "bernstein_matrix", "bezier_positions",
+    "center_path", "elevate_degree", "canonical_time_direction", "linear_path", "arc_path", "shake_path",
+    "shake6_path", "random_path", "preset_path", "PRESETS", "save_path_json", "load_path_json", "read_path_json",
 ]
 
 
@@ -449,12 +430,8 @@ def path_view_mismatch(control_points, view_shape, stated_view_shape) -> str | N
     -------
     str or None
         A sentence for people, or None when the sizes agree, are not known,
-        or the path has neither ``p_z`` nor a rotation.
-
-    Raises
-    ------
-    ValueError
-        On malformed control points, or shapes that are not ``(Y, X)``.
+        or the path has neither ``p_z`` nor a rotation. ValueError on shapes
+        that are not ``(Y, X)``.
 
     Examples
     --------
@@ -466,9 +443,8 @@ def path_view_mismatch(control_points, view_shape, stated_view_shape) -> str | N
     cp = validate_control_points(control_points)
     shape = tuple(int(s) for s in view_shape)
     shape = shape[2:4] if len(shape) >= 4 else shape
-    for name, value in (("view_shape", shape), ("stated_view_shape", stated_view_shape)):
-        if value is not None and len(tuple(value)) != 2:
-            raise ValueError(f"{name} must be (Y, X) (or a light field's shape for view_shape); got {value!r}")
+    if len(shape) != 2 or (stated_view_shape is not None and len(tuple(stated_view_shape)) != 2):
+        raise ValueError(f"view_shape and stated_view_shape must be (Y, X); got {view_shape!r}, {stated_view_shape!r}")
     if stated_view_shape is None or tuple(stated_view_shape) == shape:
         return None
     rotation = has_rotation(cp)

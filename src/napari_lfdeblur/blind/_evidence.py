@@ -182,8 +182,9 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device, frame=None):
     caller may report or stop); returns a dict of floats: ``sigma``,
     ``misfit_blur``, ``misfit_none`` (mean squared residuals),
     ``edges_blur``, ``edges_none`` (edges per sample), ``gain``
-    (``(E_none - E_blur) / sigma^2``), ``relative``, ``reach`` (px), and
-    ``blur_found`` (bool).
+    (``(E_none - E_blur) / sigma^2``), ``relative`` (0 when ``E_none`` is
+    below a thousandth of ``sigma^2``: a flat light field), ``reach`` (px),
+    and ``blur_found`` (bool).
     """
     sigma = max(noise_sigma(g), 1e-4)
     lam = evidence_weight(p)
@@ -192,7 +193,8 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device, frame=None):
     m_none, e_none = yield from _objective(Identity(), g, lam, p)
     e0, e1 = m_none + lam * e_none, m_blur + lam * e_blur
     gain = (e0 - e1) / sigma**2
-    relative = (e0 - e1) / max(e0, 1e-30)
+    # a flat light field leaves "no blur" nothing to pay: no ratio to speak of (it was rounding over 1e-30)
+    relative = (e0 - e1) / e0 if e0 > 1e-3 * sigma**2 else 0.0
     reach = blur_reach(cp, p.n_times, g, frame)
     found = bool(gain > EVIDENCE_MARGIN and relative > RELATIVE_MARGIN and reach >= MIN_REACH)
     return {"sigma": sigma, "misfit_blur": m_blur, "misfit_none": m_none, "edges_blur": e_blur,

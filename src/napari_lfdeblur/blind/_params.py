@@ -10,10 +10,12 @@ from .._params import JsonParams, check_fields
 from ..deconvolution import DeconvolutionParams
 
 __all__ = ["METHODS", "MOTIONS", "LatentParams", "PathFitParams", "RotationFitParams", "JointParams", "BlindParams",
-           "BlindResult", "PRESETS", "PathEstimate"]
+           "BlindResult", "PRESETS", "PathEstimate", "MAX_EDGE_WIDTH"]
 
 METHODS = ("alternating", "joint")
 MOTIONS = ("3dof", "6dof")
+#: the widest edge model (``edge_sigma``, ``|edge_anisotropy|``) taken, px: a wider edge profile is blur, not an edge
+MAX_EDGE_WIDTH = 5.0
 
 
 @dataclass(frozen=True)
@@ -42,8 +44,8 @@ class LatentParams(JsonParams):
     edge_sigma : float
         The salient-edge latent is taken to be sharper than the scene by a
         spatial Gaussian of this many pixels, applied inside the model, so
-        that the path need not absorb the edge profile (0: off). Without it
-        the path comes out too long (docs/blind.md).
+        that the path need not absorb the edge profile (0: off; at most
+        5 px). Without it the path comes out too long (docs/blind.md).
     edge_anisotropy : float
         How much softer the scene's edges are along ``x`` than along ``y``,
         in px: the Gaussian along ``y`` that would make them equally soft
@@ -53,7 +55,7 @@ class LatentParams(JsonParams):
         edge_sigma**2 - a |a| / 2`` (at least 0). A property of the camera,
         not of the motion (``benchmarks/scene_anisotropy.py`` measures it;
         docs/blind.md); with the isotropic default the path estimate absorbs
-        the difference. 0: isotropic.
+        the difference. 0: isotropic. Within +-5 px.
     edge_sigma_from : int
         The edge model is used from this alternation of the first level on
         (1: from the start). Used from the start it lets the Gaussian
@@ -81,6 +83,9 @@ class LatentParams(JsonParams):
                      signed=("edge_anisotropy",), unit=("l0_decay", "l0_floor"))
         if self.hqs_kappa <= 1:
             raise ValueError(f"BlindParams.latent.hqs_kappa must be > 1; got {self.hqs_kappa}")
+        for name, value in (("edge_sigma", self.edge_sigma), ("edge_anisotropy", self.edge_anisotropy)):
+            if abs(value) > MAX_EDGE_WIDTH:
+                raise ValueError(f"BlindParams.latent.{name} must be within {MAX_EDGE_WIDTH:g} px; got {value}")
 
 
 @dataclass(frozen=True)

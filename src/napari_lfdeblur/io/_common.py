@@ -11,6 +11,7 @@ import operator
 import os
 import shutil
 import uuid
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -225,7 +226,8 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
     Integer data is divided by its dtype's maximum. Float data must already
     lie in [0, 1] (overshoots of up to 1e-3 from rounding are clipped), unless
     ``value_range=(lo, hi)`` maps ``lo`` to 0 and ``hi`` to 1, or
-    ``value_range='auto'`` uses the data's own minimum and maximum.
+    ``value_range='auto'`` uses the data's own minimum and maximum (constant
+    data is read as 0, with a warning).
 
     Raises
     ------
@@ -259,6 +261,8 @@ def to_float01(arr, path, *, value_range=None) -> np.ndarray:
     if value_range is not None:
         lo, hi = (float(arr.min()), float(arr.max())) if value_range == "auto" else value_range
         if not hi > lo:  # 'auto' on constant data
+            warnings.warn(f"{path}: every value is {lo:.6g}, so value_range='auto' has no range to stretch; it is "
+                          "read as 0 everywhere (give value_range=(lo, hi) to read it on a scale)", stacklevel=2)
             hi = lo + 1.0
         if arr.dtype.itemsize > 4:  # float64 and wider: scaled first (values may lie beyond float32's range)
             out = ((arr - lo) * (1.0 / (hi - lo))).astype(np.float32)
