@@ -109,7 +109,8 @@ from ._joint import iter_joint
 from ._memory import (TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tile_for_margin, tiled_peak,
                       tiles, within)
 from ._rotation import iter_rotation_fit
-from ._params import PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams, RotationFitParams
+from ._params import (MAX_EDGE_WIDTH, PRESETS, BlindParams, BlindResult, JointParams, LatentParams, PathFitParams,
+                      RotationFitParams)
 from ._windows import check_windows, path_windows, stage_preview
 
 #: why ``infinity_disparity='auto'`` is refused (docs/blind.md, "Where d_inf comes from")
@@ -132,6 +133,7 @@ __all__ = [
     "estimate_blind_memory",
     "check_infinity_disparity",
     "AUTO_MESSAGE",
+    "MAX_EDGE_WIDTH",
 ]
 
 
