@@ -214,8 +214,9 @@ def angular_error(estimate, reference, *, crop: int = 0) -> float:
     Raises
     ------
     ValueError
-        For inputs of different shapes, empty ones, NaN or Inf, one light
-        view, or dtypes of different ranges (integers against floats).
+        For inputs of different shapes, empty ones, NaN or Inf, light
+        fields of one view, or dtypes of different ranges (integers against
+        floats).
     """
     estimate, reference = as_array(estimate), as_array(reference)
     if white_level(estimate.dtype) != white_level(reference.dtype):
