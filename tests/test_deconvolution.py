@@ -783,6 +783,7 @@ def test_params_json_round_trip_and_overrides():
         ({"init": np.zeros((3, 3, 5, 6), np.float32)}, "shape"),
         ({"n_iter": 0}, "n_iter"),
         ({"tol": -1}, "tol"),
+        ({"tol": 5}, r"tol must be in \[0, 1\)"),  # a fraction: 5 stopped at the first check
         ({"n_times": 1}, "n_times"),
         ({"infinity_disparity": float("nan")}, "infinity_disparity"),
         ({"infinity_disparity": 3.5}, "at most 3"),  # 3x3 views of 6x6 px: the outer views would move 3.5 px

@@ -134,6 +134,7 @@ class DeconvolutionParams(JsonParams):
     tol : float
         ``'tv'`` stops at the first iteration whose objective ``F`` fell by
         less than ``tol * F`` (a rise never stops it); 0 runs ``n_iter``.
+        In [0, 1).
     isotropic : bool
         Isotropic 4D TV (True: the norm of the four differences at each
         sample) or anisotropic (False, the default: the sum of their norms,
@@ -203,8 +204,8 @@ class DeconvolutionParams(JsonParams):
             object.__setattr__(self, "weight", w)
         object.__setattr__(self, "n_iter", check_int(self.n_iter, "n_iter", 1))
         tol = check_number(self.tol, "tol")
-        if tol < 0:
-            raise ValueError(f"tol must be >= 0; got {tol}")
+        if not 0 <= tol < 1:  # the objective is >= 0: it never falls by all of itself
+            raise ValueError(f"tol must be in [0, 1), a fraction of the objective; got {tol}")
         object.__setattr__(self, "tol", tol)
         try:  # numbers (a string's characters would each be read as one)
             aw = () if isinstance(self.axis_weights, (str, bytes)) else tuple(
