@@ -237,8 +237,9 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
 
     The fields the package reads back are ``n_times``, ``infinity_disparity``
     and ``view_shape``, the ``(Y, X)`` of the views the path belongs to
-    (:func:`path_view_mismatch`); they are checked here as they are when
-    read. Other values become JSON: numpy scalars numbers, tuples and small
+    (:func:`path_view_mismatch`); they are checked here as the commands and
+    widgets that use them check them (:func:`read_path_json` returns a
+    file's fields as stated, since an option may replace them). Other values become JSON: numpy scalars numbers, tuples and small
     arrays lists, other objects their ``repr``. The file is written to a
     temporary name and renamed, so a failure leaves no half-written file.
     An existing file is kept unless ``overwrite``.
