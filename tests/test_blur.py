@@ -181,7 +181,8 @@ def test_adjoint_equals_autograd_vjp(d_inf, engine):
         (dict(n_times=2.5), "n_times"),
         (dict(infinity_disparity=np.inf), "infinity_disparity must be finite"),
         (dict(infinity_disparity=-2.5), "must be at most 2"),  # 3x3 views of 4x4 px: the outer ones move 2.5 px
-        
+        (dict(lf=(np.zeros((3, 3, 4, 4)), np.zeros((4, 4)))), "pass the first"),  # a scene's (lf, disparity)
+        (dict(lf=[np.zeros((3, 3, 4, 4))] * 2), "list of 2 arrays"),  # not read as one (2, 3, 3, 4, 4) array
     ],
 )
 def test_bad_input_gives_clear_errors(kwargs, message):

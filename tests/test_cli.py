@@ -584,6 +584,20 @@ def test_deconvolve_tol_reaches_the_solver(lf_file, tmp_path, monkeypatch, capsy
     assert saved["tol"] == 0.0  # the file states the tolerance it was restored with
 
 
+def test_deconvolve_inplane_refuses_the_tv_options_it_would_not_use(lf_file, tmp_path, monkeypatch, capsys):
+    _, src = lf_file
+    save_path_json(tmp_path / "p.json", linear_path(1.0))
+    seen = _spy_on_deconvolve(monkeypatch)
+    for flags in (["--along-views"], ["--iterations", "5", "--tol", "0"]):
+        assert main(["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "d.npz"),
+                     "--method", "inplane", *flags]) != 0
+        assert f"{flags[0]}" in capsys.readouterr().err
+    assert seen == [] and not (tmp_path / "d.npz").exists()  # refused before any work
+    assert main(["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "d.npz"),
+                 "--method", "inplane", "--weight", "0.01", "--device", "cpu"]) == 0
+    assert seen[0]["method"] == "inplane" and seen[0]["weight"] == 0.01
+
+
 def test_deconvolve_takes_t_from_the_path_file_else_32(lf_file, tmp_path, monkeypatch):
     lf, _ = lf_file
     write_lightfield(tmp_path / "b.npz", lf, metadata={"n_times": 8})  # the input states a T, its path file none
@@ -766,13 +780,17 @@ def test_an_output_beside_the_input_may_not_replace_the_inputs_path_file(lf_file
     assert main(["deconvolve", str(blurred), str(tmp_path / "d.npz"), "--iterations", "2"]) == 0
 
 
-def test_demo_replaces_only_its_own_files(tmp_path, capsys):
+def test_demo_replaces_only_its_own_files(tmp_path, capsys, monkeypatch):
     out = tmp_path / "project"
     out.mkdir()
     (out / "summary.json").write_text('{"my": "results"}')  # a file of the user's, of a name the demo writes
     (out / "notes.txt").write_text("mine")
     assert main(["demo", "--out", str(out), "--quick", "--skip-blind"]) == 2
     assert "summary.json exists and is not the demo's" in capsys.readouterr().err
+    with monkeypatch.context() as m:  # --out "$UNSET": refused, not read as the current folder
+        m.chdir(out)
+        assert main(["demo", "--out", "", "--quick", "--skip-blind"]) == 2
+    assert "empty name" in capsys.readouterr().err
     assert (out / "summary.json").read_text() == '{"my": "results"}' and sorted(p.name for p in out.iterdir()) == [
         "notes.txt", "summary.json"]
     # an earlier demo's files are its own: a rerun replaces them, and removes those it does not make

@@ -394,6 +394,11 @@ def _run_deconvolve(args):
     from .path import read_path_json, validate_control_points
     from .progress import run_to_completion
 
+    tv_only = {"--separate-channels": args.separate_channels, "--no-saturation": args.no_saturation,
+               "--along-views": args.along_views, "--iterations": args.iterations != 200, "--tol": args.tol != 1e-4}
+    if args.method == "inplane" and any(tv_only.values()):
+        raise CLIError(f"{', '.join(k for k, v in tv_only.items() if v)}: options of the tv solve, which --method "
+                       "inplane (a linear solve that takes only --weight) does not use; leave them out or use --method tv")
     out = Path(args.output)
     inputs = [args.input] + ([args.path_json] if args.path_json else [])
     _check_targets([out, sidecar_path_json(out)], args.overwrite, inputs)  # the result, and its path

@@ -201,9 +201,14 @@ def run_demo(out_dir="demo_out", *, device="auto", quick: bool = False, blind: b
     FileExistsError
         When the folder holds a file of a name the demo writes that an
         earlier demo run did not write (before any work).
+    ValueError
+        When ``out_dir`` is an empty string (``"."`` names the current
+        folder), as an unset shell variable gives.
     """
     from .devices import select_device
 
+    if isinstance(out_dir, str) and not out_dir.strip():
+        raise ValueError("the demo's output folder is an empty name: give a folder ('.' for the current one)")
     select_device(device)  # an unusable device: an error before the folder is made
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
