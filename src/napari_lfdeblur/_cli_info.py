@@ -1,24 +1,29 @@
 """What the ``lfdeblur`` command says about light fields, paths and results: ``lfdeblur info`` on a light
 field, a camera path file (``.json``) or a batch output folder, the path notes it prints, the metadata it
-stores with a light field it computed."""
+stores with a light field it computed, the checks of its outputs and options, the commands it suggests."""
 
 from __future__ import annotations
 
 import json
 import os
 import re
+import shlex
 import sys
 import uuid
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CLIError", "check_targets", "in_cli_words", "DEFAULT_N_TIMES", "describes", "describe",
+__all__ = ["CLIError", "check_targets", "in_cli_words", "DEFAULT_N_TIMES", "TV_ITERATIONS", "TV_TOL",
+           "refuse_unused_tv_options", "deconvolve_command", "describes", "describe",
            "describe_lightfield", "describe_path", "describe_path_file", "describe_batch_folder", "result_metadata",
            "rotation_note", "stated_value", "warn_view_mismatch"]
 
 #: Instants a path is sampled at when its file does not state ``n_times`` (``info``, ``simulate``, ``deconvolve``)
 DEFAULT_N_TIMES = 32
+
+#: ``lfdeblur deconvolve``'s defaults for the tv solve's ``--iterations`` and ``--tol``
+TV_ITERATIONS, TV_TOL = 200, 1e-4
 
 
 def stated_value(given, key: str, sources, default):
@@ -273,3 +278,30 @@ def in_cli_words(message: str) -> str:
         message = (f"{', '.join(spelt(found.group(1)))} does not apply to layout {found.group(2)!r} "
                    f"(its options: {taken})")
     return message
+
+
+def refuse_unused_tv_options(args) -> None:
+    """Refuse ``lfdeblur deconvolve --method inplane`` given options of the tv solve, which it would not use."""
+    given = {"--separate-channels": args.separate_channels, "--no-saturation": args.no_saturation,
+             "--along-views": args.along_views, "--iterations": args.iterations != TV_ITERATIONS,
+             "--tol": args.tol != TV_TOL}
+    if args.method == "inplane" and any(given.values()):
+        raise CLIError(f"{', '.join(k for k, v in given.items() if v)}: options of the tv solve, which --method "
+                       "inplane (a linear solve that takes only --weight) does not use; leave them out or use "
+                       "--method tv")
+
+
+def deconvolve_command(args, path_file) -> str:
+    """The ``lfdeblur deconvolve`` line that reads ``args.input`` as ``deblur`` did and restores with ``path_file``."""
+    words = ["lfdeblur", "deconvolve", args.input, str(path_file), "OUTPUT"]
+    if args.swap_views:
+        words.append("--swap-views")
+    for option, key in (("--layout", "layout"), ("--grid", "grid"), ("--angular-size", "angular_size"),
+                        ("--angular-crop", "angular_crop")):
+        value = getattr(args, key)
+        if value is not None:
+            words += [option, ",".join(map(str, value)) if isinstance(value, tuple) else str(value)]
+    if args.value_range is not None:  # one word, so that a negative LO is not read as an option
+        vr = args.value_range
+        words.append("--value-range=" + (vr if isinstance(vr, str) else ",".join(repr(float(v)) for v in vr)))
+    return shlex.join(words)

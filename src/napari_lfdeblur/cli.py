@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
 import sys
 import warnings
 from pathlib import Path
@@ -18,12 +17,16 @@ from pathlib import Path
 from ._cli_batch import add_batch as _add_batch, blind_params, run_batch as _run_batch  # noqa: F401 (batch)
 from ._cli_info import (
     DEFAULT_N_TIMES,
+    TV_ITERATIONS,
+    TV_TOL,
     CLIError,
     check_targets as _check_targets,
+    deconvolve_command,
     describe,
     describe_lightfield,
     describes,
     in_cli_words,
+    refuse_unused_tv_options,
     result_metadata,
     rotation_note,
     stated_value,
@@ -285,27 +288,11 @@ def _run_deblur(args):
     if "rejected_path" in result.info:
         save_path_json(rejected_file, result.info["rejected_path"], overwrite=True, **fields)
         print(f"the path it rejected is in {rejected_file}; to restore with it without estimating it again: "
-              f"{_deconvolve_command(args, rejected_file)}")
+              f"{deconvolve_command(args, rejected_file)}")
     elif rejected_file.exists():  # an earlier run's (replaced with --overwrite): it would pass for this run's
         rejected_file.unlink()
     print(f"wrote {out} {result.lightfield.shape} and its path {path_file}{rotation_note(result.control_points)} "
           f"({result.timings.get('total', float('nan')):.1f} s)")
-
-
-def _deconvolve_command(args, path_file) -> str:
-    """The ``lfdeblur deconvolve`` line that reads ``args.input`` as ``deblur`` did and restores with ``path_file``."""
-    words = ["lfdeblur", "deconvolve", args.input, str(path_file), "OUTPUT"]
-    if args.swap_views:
-        words.append("--swap-views")
-    for option, key in (("--layout", "layout"), ("--grid", "grid"), ("--angular-size", "angular_size"),
-                        ("--angular-crop", "angular_crop")):
-        value = getattr(args, key)
-        if value is not None:
-            words += [option, ",".join(map(str, value)) if isinstance(value, tuple) else str(value)]
-    if args.value_range is not None:  # one word, so that a negative LO is not read as an option
-        vr = args.value_range
-        words.append("--value-range=" + (vr if isinstance(vr, str) else ",".join(repr(float(v)) for v in vr)))
-    return shlex.join(words)
 
 
 # ------------------------------------------------------------------ demo
@@ -377,9 +364,10 @@ def _add_deconvolve(sub):
                    help="tv: the isotropic TV whose angular differences compare the same pixel of neighbouring "
                         "views (default: the anisotropic TV along the scene's disparity, estimated from the input, "
                         "which restores better in about twice the time; docs/deconvolution.md)")
-    p.add_argument("--iterations", type=int, default=200, help="maximum TV iterations (default 200)")
-    p.add_argument("--tol", type=float, default=1e-4,
-                   help="TV stops when the objective falls by less than this fraction in an iteration (default 1e-4)")
+    p.add_argument("--iterations", type=int, default=TV_ITERATIONS,
+                   help=f"maximum TV iterations (default {TV_ITERATIONS})")
+    p.add_argument("--tol", type=float, default=TV_TOL, help="TV stops when the objective falls by less than this "
+                   f"fraction in an iteration (default {TV_TOL:g})")
     p.add_argument("--n-times", type=int, default=None,
                    help="exposure instants T (default: those stated with the path, else 32)")
     p.add_argument("--infinity-disparity", type=float, default=None,
@@ -394,11 +382,7 @@ def _run_deconvolve(args):
     from .path import read_path_json, validate_control_points
     from .progress import run_to_completion
 
-    tv_only = {"--separate-channels": args.separate_channels, "--no-saturation": args.no_saturation,
-               "--along-views": args.along_views, "--iterations": args.iterations != 200, "--tol": args.tol != 1e-4}
-    if args.method == "inplane" and any(tv_only.values()):
-        raise CLIError(f"{', '.join(k for k, v in tv_only.items() if v)}: options of the tv solve, which --method "
-                       "inplane (a linear solve that takes only --weight) does not use; leave them out or use --method tv")
+    refuse_unused_tv_options(args)
     out = Path(args.output)
     inputs = [args.input] + ([args.path_json] if args.path_json else [])
     _check_targets([out, sidecar_path_json(out)], args.overwrite, inputs)  # the result, and its path
