@@ -44,6 +44,20 @@ def test_quick_run_writes_a_table(blind_eval, tmp_path):
     assert len(data["cases"]) == 1 and data["split"] == "dev"
 
 
+def test_a_full_run_warms_each_method_up_on_a_tiny_case_first(blind_eval, tmp_path, monkeypatch):
+    calls, real, real_make = [], blind_eval.run_method, blind_eval.make_case
+
+    def spy(method, case, device, quick):
+        calls.append((method, quick))
+        return real(method, case, device, True)
+
+    monkeypatch.setattr(blind_eval, "run_method", spy)
+    monkeypatch.setattr(blind_eval, "make_case", lambda spec, quick=False: real_make(spec, quick=True))  # tiny
+    assert blind_eval.main(["--cases", "dev04", "--methods", "truepath", "--output", str(tmp_path / "e.md")]) == 0
+    # the warm-up's call (quick) comes before the timed one
+    assert calls == [("truepath", True), ("truepath", False)]
+
+
 def test_splits_cover_the_set_and_do_not_overlap(blind_eval):
     es = blind_eval.eval_set
     dev, test = es.split_cases("dev"), es.split_cases("test")
