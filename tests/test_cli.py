@@ -386,6 +386,10 @@ def test_info_describes_a_batch_output_folder(tmp_path, capsys):
     assert "failed:      d.npz: OSError: disk full" in out and "a.npz" not in out
     assert "blur found:  in 1 of 3; 1 with little blur found, returned unchanged" in out and "restored lightly" in out
     assert "redoes the failed items" in out
+    (tmp_path / "manifest.jsonl").write_text("")  # a batch that has not finished an item yet
+    assert main(["info", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "none in the manifest yet" in out and "?" not in out
 
 
 @pytest.mark.parametrize("motion", [None, "3dof", "6dof"])

@@ -87,6 +87,9 @@ def describe_batch_folder(out_dir) -> list[str]:
     from .batch import read_manifest
 
     records = list(read_manifest(out_dir).values())
+    if not records:
+        return [f"batch:       {out_dir} (lfdeblur batch)",
+                "items:       none in the manifest yet: the batch has not finished an item (or was stopped first)"]
     kinds = sorted({str(r.get("kind")) for r in records})
     versions = sorted({str(r.get("version")) for r in records})
     status = [r.get("status") for r in records]
