@@ -194,6 +194,12 @@ def test_bad_input_gives_clear_errors(kwargs, message):
         simulate_blur(lf, cp, **args)
 
 
+def test_a_list_of_rows_of_views_is_one_light_field():
+    lf = np.random.default_rng(0).random((3, 3, 4, 4))
+    cp = [[0, 0, 0], [1, 0, 0]]
+    np.testing.assert_array_equal(simulate_blur(list(lf), cp, n_times=4), simulate_blur(lf, cp, n_times=4))
+
+
 def test_wrong_types_are_type_errors():
     lf, cp = np.zeros((3, 3, 4, 4)), [[0, 0, 0], [1, 0, 0]]
     with pytest.raises(TypeError, match="infinity_disparity"):

@@ -182,14 +182,19 @@ def validate_lightfield(lf, name: str = "light field", *, finite: bool = True) -
     ValueError
         On a wrong number of dimensions or channels, an empty array, a
         non-numeric or complex dtype, NaN or Inf, or a tuple or list of
-        arrays (such as the ``(lightfield, disparity)`` pair that
-        :func:`~napari_lfdeblur.synthetic_scene` returns).
+        arrays of different shapes or of light fields (such as the
+        ``(lightfield, disparity)`` pair that
+        :func:`~napari_lfdeblur.synthetic_scene` returns; a list of rows of
+        views, ``(U, Y, X[, C])`` each, is one light field).
     """
     if isinstance(lf, (tuple, list)) and any(isinstance(x, np.ndarray) or hasattr(x, "detach") for x in lf):
-        raise ValueError(
-            f"a {name} is one array (V, U, Y, X[, C]); got a {type(lf).__name__} of {len(lf)} arrays. "
-            "synthetic_scene and procedural_scene return (lightfield, disparity): pass the first"
-        )
+        shapes = {tuple(getattr(x, "shape", ())) for x in lf}
+        if len(shapes) > 1 or max(map(len, shapes)) >= 4:
+            raise ValueError(
+                f"a {name} is one array (V, U, Y, X[, C]); got a {type(lf).__name__} of {len(lf)} arrays of "
+                f"shapes {sorted(shapes)}. synthetic_scene and procedural_scene return (lightfield, disparity): "
+                "pass the first"
+            )
     arr = as_array(lf)
     if arr.ndim in (2, 3):
         raise ValueError(
