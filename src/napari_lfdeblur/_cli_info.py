@@ -5,11 +5,9 @@ stores with a light field it computed, the checks of its outputs and options, th
 from __future__ import annotations
 
 import json
-import os
 import re
 import shlex
 import sys
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -249,7 +247,9 @@ def check_targets(targets, overwrite: bool, inputs=()) -> None:
 def _check_folder_takes_files(target: Path) -> None:
     """Refuse, before any work, an output whose folder exists but takes no new file (read-only, or not ours),
     found by creating a file there and removing it (permission bits do not tell root's refusals)."""
-    probe = target.parent / f".lfdeblur-probe-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    from .io._common import temporary_name
+
+    probe = temporary_name(target)
     try:
         probe.touch(exist_ok=False)
     except OSError as exc:

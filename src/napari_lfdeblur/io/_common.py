@@ -38,6 +38,7 @@ __all__ = [
     "validate_lightfield",
     "atomic_file",
     "atomic_dir",
+    "temporary_name",
 ]
 
 #: Environment variable that caps the memory a read may use, in bytes.
@@ -298,7 +299,8 @@ def validate_lightfield(lf, path="light field") -> np.ndarray:
 # ----------------------------------------------------------------- atomic writes
 
 
-def _tmp_name(path: Path, suffix: str = "") -> Path:
+def temporary_name(path: Path, suffix: str = "") -> Path:
+    """A hidden name beside ``path``, unique to this process and call, for a file written and then renamed."""
     return path.with_name(f".{path.name}.tmp{os.getpid()}-{uuid.uuid4().hex[:8]}{suffix}")
 
 
@@ -321,7 +323,7 @@ def atomic_file(path, *, overwrite=False):
     check_writable(path, overwrite)
     if path.is_dir():
         raise IsADirectoryError(f"cannot write {path}: it is a folder")
-    tmp = _tmp_name(path, path.suffix)
+    tmp = temporary_name(path, path.suffix)
     try:
         yield tmp
         if path.exists() and not overwrite:  # appeared meanwhile
@@ -351,8 +353,8 @@ def atomic_dir(path, *, overwrite=False, replaceable=None):
                 f"{path} contains files that are not light-field views ({', '.join(sorted(foreign)[:3])}"
                 f"{', ...' if len(foreign) > 3 else ''}); refusing to replace it, choose another folder"
             )
-    tmp = _tmp_name(path)
-    old = _tmp_name(path, ".old")
+    tmp = temporary_name(path)
+    old = temporary_name(path, ".old")
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir()
