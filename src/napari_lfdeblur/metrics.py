@@ -121,17 +121,21 @@ def _ranged_pair(estimate, reference, crop, data_range):
     return (*_pair(estimate, reference, crop), value)
 
 
+def _common_white_level(est_dtype, ref_dtype, remedy: str) -> float:
+    """The top of the range of both dtypes (:func:`white_level`); ValueError, ending in ``remedy``, when they differ."""
+    levels = {white_level(d) for d in (est_dtype, ref_dtype)}
+    if len(levels) > 1:
+        raise ValueError(f"estimate ({est_dtype}) and reference ({ref_dtype}) have different ranges: {remedy}")
+    return levels.pop()
+
+
 def _data_range(value, est_dtype, ref_dtype) -> float:
     """``data_range`` as a positive float (TypeError for a non-number, ValueError when not positive).
 
     None: the top of the inputs' range (:func:`white_level` of their dtypes), when they agree on it.
     """
     if value is None:
-        levels = {white_level(d) for d in (est_dtype, ref_dtype)}
-        if len(levels) > 1:
-            raise ValueError(f"estimate ({est_dtype}) and reference ({ref_dtype}) have different ranges: "
-                             "give data_range")
-        return levels.pop()
+        return _common_white_level(est_dtype, ref_dtype, "give data_range")
     value = check_number(value, "data_range")
     if not value > 0:
         raise ValueError(f"data_range must be positive; got {value!r}")
@@ -219,9 +223,8 @@ def angular_error(estimate, reference, *, crop: int = 0) -> float:
         floats).
     """
     estimate, reference = as_array(estimate), as_array(reference)
-    if white_level(estimate.dtype) != white_level(reference.dtype):
-        raise ValueError(f"estimate ({estimate.dtype}) and reference ({reference.dtype}) have different ranges: "
-                         "convert one to the other's (for example, integers to 0..1 floats)")
+    _common_white_level(estimate.dtype, reference.dtype,
+                        "convert one to the other's (for example, integers to 0..1 floats)")
     est, ref = _pair(estimate, reference, crop)
     if est.ndim not in (4, 5):
         raise ValueError(f"angular_error needs light fields (V, U, Y, X[, C]); got {est.ndim}D arrays")
