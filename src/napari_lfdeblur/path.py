@@ -239,8 +239,9 @@ def save_path_json(path, control_points, *, overwrite: bool = False, **extra) ->
     and ``view_shape``, the ``(Y, X)`` of the views the path belongs to
     (:func:`path_view_mismatch`); they are checked here as the commands and
     widgets that use them check them (:func:`read_path_json` returns a
-    file's fields as stated, since an option may replace them). Other values become JSON: numpy scalars numbers, tuples and small
-    arrays lists, other objects their ``repr``. The file is written to a
+    file's fields as stated, since an option may replace them). Other
+    values become JSON: numpy scalars numbers, tuples and small arrays
+    lists, other objects their ``repr``. The file is written to a
     temporary name and renamed, so a failure leaves no half-written file.
     An existing file is kept unless ``overwrite``.
 
@@ -431,8 +432,13 @@ def path_view_mismatch(control_points, view_shape, stated_view_shape) -> str | N
     -------
     str or None
         A sentence for people, or None when the sizes agree, are not known,
-        or the path has neither ``p_z`` nor a rotation. ValueError on shapes
-        that are not ``(Y, X)``.
+        or the path has neither ``p_z`` nor a rotation.
+
+    Raises
+    ------
+    ValueError
+        When ``view_shape`` (after dropping a light field's ``(V, U)``) or
+        ``stated_view_shape`` is not ``(Y, X)``.
 
     Examples
     --------

@@ -193,7 +193,7 @@ def blur_evidence(g: torch.Tensor, cp, p: BlindParams, device, frame=None):
     m_none, e_none = yield from _objective(Identity(), g, lam, p)
     e0, e1 = m_none + lam * e_none, m_blur + lam * e_blur
     gain = (e0 - e1) / sigma**2
-    # a flat light field leaves "no blur" nothing to pay: no ratio to speak of (it was rounding over 1e-30)
+    # a flat light field leaves "no blur" nothing to pay: no ratio to speak of (one over ~0 is rounding noise)
     relative = (e0 - e1) / e0 if e0 > 1e-3 * sigma**2 else 0.0
     reach = blur_reach(cp, p.n_times, g, frame)
     found = bool(gain > EVIDENCE_MARGIN and relative > RELATIVE_MARGIN and reach >= MIN_REACH)
