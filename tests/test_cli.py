@@ -600,6 +600,11 @@ def test_deconvolve_inplane_refuses_the_tv_options_it_would_not_use(lf_file, tmp
     assert main(["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "d.npz"),
                  "--method", "inplane", "--weight", "0.01", "--device", "cpu"]) == 0
     assert seen[0]["method"] == "inplane" and seen[0]["weight"] == 0.01
+    # the command's tv defaults (kept apart so that --help needs no torch) are the solver's own
+    from napari_lfdeblur._cli_info import TV_ITERATIONS, TV_TOL
+    from napari_lfdeblur.deconvolution import DeconvolutionParams
+
+    assert (TV_ITERATIONS, TV_TOL) == (DeconvolutionParams().n_iter, DeconvolutionParams().tol)
 
 
 def test_deconvolve_takes_t_from_the_path_file_else_32(lf_file, tmp_path, monkeypatch):
