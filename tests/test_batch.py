@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import json
+import signal
 import sys
 import threading
 from pathlib import Path
@@ -405,6 +406,9 @@ def test_batch_summary_counts_inputs_returned_unchanged_and_restored_lightly():
     assert weak_blur_summary(recs) == ("; 1 with little blur found, returned unchanged (blur_found in the manifest)"
                                        "; 2 with little blur found, restored lightly (restoration in the manifest)")
     assert weak_blur_summary(recs[3:]) == ""
+    refused = [{"status": "ok", "blur_found": True, "restoration": "none"}]
+    assert weak_blur_summary(recs[3:] + refused) == ("; 1 with blur found but a restoration that did not reproduce "
+                                                     "the data, returned unchanged (restoration in the manifest)")
 
 
 def test_embedded_cluster_workers_start_with_malloc_thresholds_no_profiler_and_slow_timers(monkeypatch):
@@ -475,11 +479,16 @@ def test_a_ctrl_c_that_lands_in_a_finalizer_still_stops_the_run():
             raise KeyboardInterrupt
 
     default = sys.unraisablehook
-    with pytest.raises(KeyboardInterrupt), ctrl_c_never_swallowed():
-        obj = Releasing()
-        del obj  # the finalizer's KeyboardInterrupt is raised again in the main thread, right after
-        for _ in range(100):
-            time.sleep(0.01)
+    # Python's own Ctrl-C handler, which a process started in the background (SIGINT ignored) lacks
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt), ctrl_c_never_swallowed():
+            obj = Releasing()
+            del obj  # the finalizer's KeyboardInterrupt is raised again in the main thread, 0.1 s after
+            for _ in range(100):
+                time.sleep(0.01)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert sys.unraisablehook is default
 
 

@@ -27,7 +27,7 @@ from napari_lfdeblur.blind import (
 )
 from napari_lfdeblur.blur import BlurOperator, simulate_blur
 from napari_lfdeblur.deconvolution import DeconvolutionParams, deconvolve
-from napari_lfdeblur.path import bezier_positions, center_path, linear_path
+from napari_lfdeblur.path import arc_path, bezier_positions, center_path, linear_path
 from napari_lfdeblur.priors import gradient_yx, sparse_gradient_prior
 from napari_lfdeblur.progress import run_to_completion, with_previews
 from napari_lfdeblur.samples import synthetic_scene
@@ -248,6 +248,74 @@ def test_no_harm_on_an_unblurred_or_barely_blurred_light_field(extent, monkeypat
         none = blind_deblur(blurred, params=params, device="cpu")
         assert none.info["restoration"] == "none" and "disagree on the path" in none.info["message"]
         np.testing.assert_array_equal(none.lightfield, blurred)
+
+
+def test_restoration_discrepancy_reads_the_noise_left_by_the_right_path():
+    # f = K_p x + white noise: the right path and the sharp light field leave exactly the noise, one variance per
+    # sample (to sampling error: 78400 samples per channel), whatever d_inf; a wrong path leaves more
+    sharp = np.stack([_scene(seed=s) for s in (0, 1, 2)], axis=-1) * np.float32(0.8) + np.float32(0.1)
+    cp, sigma = linear_path(2.0, angle_deg=30.0), 0.01
+    for d_inf in (0.0, 0.5):
+        noise = np.random.default_rng(3).normal(0, sigma, sharp.shape).astype(np.float32)
+        f = simulate_blur(sharp, cp, n_times=8, infinity_disparity=d_inf) + noise
+        assert float(f.max()) < 1.0
+        d = _evidence.restoration_discrepancy(f, sharp, cp, 8, d_inf, sigma, "cpu")
+        assert d == pytest.approx(float(np.mean(noise.astype(np.float64) ** 2)) / sigma**2, rel=1e-4)
+        assert d == pytest.approx(1.0, abs=0.02)
+        assert _evidence.restoration_discrepancy(f, sharp, 0 * cp, 8, d_inf, sigma, "cpu") > 5.0  # no blur: misses it
+    # samples at the white level (clipped by the sensor) do not count, whatever the restoration makes of them
+    clipped = f.copy()
+    clipped[:, :, :5] = 1.0
+    kept = np.ones(f.shape, bool)
+    kept[:, :, :5] = False
+    want = float(np.mean(noise[kept].astype(np.float64) ** 2)) / sigma**2
+    assert _evidence.restoration_discrepancy(clipped, sharp, cp, 8, 0.5, sigma, "cpu") == pytest.approx(want, rel=1e-4)
+    # grayscale; a restoration off by a constant 0.5 sigma leaves a quarter of a variance more than the noise
+    grey = simulate_blur(sharp[..., 0], cp, n_times=8) + noise[..., 0]
+    off = _evidence.restoration_discrepancy(grey, sharp[..., 0] + np.float32(0.5 * sigma), cp, 8, 0.0, sigma, "cpu")
+    exact = _evidence.restoration_discrepancy(grey, sharp[..., 0], cp, 8, 0.0, sigma, "cpu")
+    assert off == pytest.approx(exact + 0.25 - float(np.mean(noise[..., 0])) / sigma, rel=1e-3)
+    with pytest.raises(ValueError, match="positive noise level"):  # no noise, no scale
+        _evidence.restoration_discrepancy(grey, sharp[..., 0], cp, 8, 0.0, 0.0, "cpu")
+
+
+def test_a_restoration_that_does_not_reproduce_the_data_is_not_returned(linear_case, linear_result, monkeypatch):
+    from napari_lfdeblur.deconvolution import estimate_noise_sigma
+
+    _, _, blurred = linear_case
+    res, params = linear_result, linear_result.params
+    assert res.info["noise_sigma"] == pytest.approx(estimate_noise_sigma(blurred))
+    want = _evidence.restoration_discrepancy(blurred, res.lightfield, res.control_points, params.final_n_times, 0.0,
+                                             res.info["noise_sigma"], "cpu")
+    assert res.info["discrepancy"] == pytest.approx(want, rel=1e-6)
+    assert 0.0 < res.info["discrepancy"] <= _evidence.DISCREPANCY_MARGIN and res.info["restoration"] == "full"
+    # the same run with a limit it cannot meet: the input, a zero path, the estimate kept, and the reason
+    monkeypatch.setattr(_evidence, "DISCREPANCY_MARGIN", 0.5 * res.info["discrepancy"])
+    refused = blind_deblur(blurred, params=params, device="cpu")
+    assert refused.info["restoration"] == "none" and refused.info["blur_found"] is True
+    np.testing.assert_array_equal(refused.lightfield, blurred)
+    assert not np.any(refused.control_points)
+    np.testing.assert_array_equal(refused.info["rejected_path"], res.control_points)
+    assert "misses the data by" in refused.info["message"] and "input is returned unchanged" in refused.info["message"]
+    # with no measurable noise there is no scale to judge by: the restoration stands
+    info = {"noise_sigma": 0.0, "restoration": "full", "message": "m"}
+    out, cp = _evidence.discrepancy_check(blurred, res.lightfield, res.control_points, 0.0, params, "cpu", info)
+    assert out is res.lightfield and cp is res.control_points and np.isnan(info["discrepancy"])
+    assert info["restoration"] == "full" and info["message"] == "m"
+    # restoring anyway means whatever the data say
+    forced = blind_deblur(blurred, params=params.replace(require_evidence=False), device="cpu")
+    assert forced.info["restoration"] == "full" and "discrepancy" not in forced.info
+    np.testing.assert_array_equal(forced.lightfield, res.lightfield)
+
+
+def test_no_harm_where_the_salient_edges_prefer_a_wrong_path():
+    # a noise-free scene of flat colours in a thin strip, lightly blurred at d_inf = 0.5: a long path explains its
+    # steps with fewer salient edges than the true one, clearly enough to pass the evidence test; restored with
+    # it the result would be several dB worse than the input, and it reproduces the data by more than the noise
+    sharp, _ = synthetic_scene((9, 9, 20, 200), seed=2)
+    blurred = simulate_blur(sharp, arc_path(1.5, 0.3), infinity_disparity=0.5)
+    res = blind_deblur(blurred, infinity_disparity=0.5, device="cpu", seed=0)
+    assert psnr(res.lightfield, sharp) >= psnr(blurred, sharp) - 0.1
 
 
 def test_split_parts_cut_the_data_in_two_and_place_the_parts():

@@ -1338,6 +1338,17 @@ def test_blind_rejected_path_becomes_a_layer_that_deconvolve_takes(make_napari_v
     monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_found)
     assert "b rejected path" not in [layer.name for layer in w.run_and_wait(timeout=60)]
     assert "b rejected path" not in viewer.layers  # the earlier run's is not this result's: removed
+    # blur found, but its restoration did not reproduce the data: the input, the path kept, and the reason shown
+    def fake_refused(lf, *, infinity_disparity, params, device, seed, windows=None, check_view_order=True):
+        yield Progress("path", 1, 1, loss=1.0)
+        return blind_core.BlindResult(lf, np.zeros((3, 3)), loss_history=[1.0], params=params,
+                                      info={"blur_found": True, "restoration": "none", "rejected_path": rejected,
+                                            "message": "blur found ...; but the restoration ... misses the data"})
+
+    monkeypatch.setattr(blind_core, "iter_blind_deblur", fake_refused)
+    assert "b rejected path" in [layer.name for layer in w.run_and_wait(timeout=60)]
+    assert notifications[-1][0] == "info" and "misses the data" in notifications[-1][1]
+    assert "'b rejected path'" in notifications[-1][1]
     assert not [n for n in notifications if n[0] == "error"], notifications
 
 

@@ -6,7 +6,8 @@ Usage::
         [--device cpu] [--preset default]
 
 Prints, per case of blind_eval.py's development split: PSNR of blurred / restored (8 px borders
-cropped), blur mismatch, Chamfer distance, the evidence test's verdict, time; with ``--oracle``
+cropped), blur mismatch, Chamfer distance, the evidence test's verdict, the restoration made and its
+discrepancy (noise variances per sample), time; with ``--oracle``
 also the non-blind restoration with the true path.
 """
 
@@ -88,7 +89,8 @@ def main(argv=None):
         p1 = psnr(res.lightfield, sharp, crop=ev.CROP)
         line = (f"{name:9s} blurred {p0:6.2f}  restored {p1:6.2f}  gain {p1 - p0:+6.2f}  "
                 f"mismatch {pe.blur_mismatch:5.3f}  chamfer {pe.chamfer:5.3f} (extent {pe.extent:4.2f})  "
-                f"blur found {res.info.get('blur_found')}  time {dt:5.1f}s (path {res.timings['path']:.1f}s)")
+                f"blur found {res.info.get('blur_found')}  restoration {res.info.get('restoration')}  "
+                f"discrepancy {res.info.get('discrepancy', float('nan')):.2f}  time {dt:5.1f}s (path {res.timings['path']:.1f}s)")
         if args.oracle:
             from napari_lfdeblur.deconvolution import deconvolve
 

@@ -213,11 +213,17 @@ def ctrl_c_never_swallowed():
 
 def weak_blur_summary(records) -> str:
     """What the run's summary line adds about inputs with little blur found: how many were returned
-    unchanged and how many restored lightly (empty when none)."""
+    unchanged and how many restored lightly; and about those with blur found whose restoration did not
+    reproduce the data, returned unchanged (empty when none)."""
     weak = [r.get("restoration", "none") for r in records if r["status"] == "ok" and r.get("blur_found") is False]
+    refused = sum(r["status"] == "ok" and r.get("blur_found") is True and r.get("restoration") == "none"
+                  for r in records)
     done = ""
     if weak.count("none"):
         done += f"; {weak.count('none')} with little blur found, returned unchanged (blur_found in the manifest)"
     if weak.count("light"):
         done += f"; {weak.count('light')} with little blur found, restored lightly (restoration in the manifest)"
+    if refused:
+        done += (f"; {refused} with blur found but a restoration that did not reproduce the data, returned "
+                 "unchanged (restoration in the manifest)")
     return done

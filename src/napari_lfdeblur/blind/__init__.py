@@ -69,7 +69,9 @@ restoration with the path scaled by ``params.light_restoration``, else the
 input itself with a zero path (docs/blind.md, "What makes it robust"). If so, every colour channel is
 restored by the non-blind
 :func:`~napari_lfdeblur.deconvolution.deconvolve` with ``params.final``
-(4D TV in both presets), tile by tile when memory is short. Both methods
+(4D TV in both presets), tile by tile when memory is short. A restoration
+that, blurred again by its path, misses the data by more than the noise
+allows is not returned: the input is (the discrepancy principle). Both methods
 return the path time-canonicalised
 (:func:`~napari_lfdeblur.path.canonical_time_direction`), since the blur
 does not depend on the order of the positions.
@@ -104,7 +106,7 @@ from ..path import bezier_positions, canonical_time_direction, center_path, path
 from ..progress import Progress, run_to_completion
 from ._alternating import iter_alternating, relay
 from ._disparity import shear
-from ._evidence import evidence_message, iter_verdict
+from ._evidence import discrepancy_check, evidence_message, iter_verdict
 from ._joint import iter_joint
 from ._memory import (TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tile_for_margin, tiled_peak,
                       tiles, within)
@@ -412,6 +414,8 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None, windows=None):
     del g, gs
     if p.final is not None and (restore or light):
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages, info)
+        if p.require_evidence:
+            out, cp = discrepancy_check(arr, out, cp, d_inf, p, dev if tile is None else "cpu", info)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()
     if p.final is None and (restore or light):  # the path stands, but nothing restored with it
@@ -428,10 +432,11 @@ def _iter_final(arr, cp, d_inf, p: BlindParams, dev, tile, n_path, info):
 
     Y, X = arr.shape[2:4]
     final = p.final
+    info["noise_sigma"] = sigma = estimate_noise_sigma(arr)  # for the weight, and the discrepancy check after
+    release_host_memory()  # the noise estimate's work, before the final stage allocates its own
     if final.weight is None:  # one weight for the whole light field, so that tiles agree
         n_channels = arr.shape[4] if arr.ndim == 5 else 1
-        final = final.replace(weight=final.effective_weight(final.method, estimate_noise_sigma(arr), n_channels))
-        release_host_memory()  # the noise estimate's work, before the final stage allocates its own
+        final = final.replace(weight=final.effective_weight(final.method, sigma, n_channels))
     info["final_weight"] = final.weight
     if tile is None:
         parts = [((slice(None), slice(None)), (slice(None), slice(None)))]

@@ -13,6 +13,11 @@ Where that evidence is weak, a light restoration (``BlindParams.light_restoratio
 still needs the blur to be the camera's: one motion for the whole view. The
 path is then estimated again, independently, on two disjoint parts of the
 data, and the two estimates must agree (:func:`iter_disagreement`).
+
+Whatever path is restored with, the restoration must then reproduce the
+data to the noise level (:func:`restoration_discrepancy`, the discrepancy
+principle): the right path leaves at most about one noise variance per
+sample, a path that does not explain the data leaves more.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ import math
 import numpy as np
 import torch
 
-from .._lightfield import DARK_LEVEL
+from .._lightfield import DARK_LEVEL, white_level
 from .._noise import estimate_noise_sigma
 from ..blur import BlurOperator, image_shifts
 from ..path import bezier_positions, center_path
@@ -35,7 +40,8 @@ from ._params import BlindParams
 
 __all__ = ["noise_sigma", "blur_reach", "evidence_weight", "blur_evidence", "evidence_message", "Identity",
            "EVIDENCE_MARGIN", "RELATIVE_MARGIN", "MIN_REACH", "AGREEMENT_MARGIN", "MIN_PART", "split_parts",
-           "path_disagreement", "iter_disagreement", "iter_verdict"]
+           "path_disagreement", "iter_disagreement", "iter_verdict", "DISCREPANCY_MARGIN",
+           "restoration_discrepancy", "discrepancy_check"]
 
 #: the blur model must lower the salient-edge objective by more than this many noise variances per sample
 EVIDENCE_MARGIN = 1.0
@@ -45,6 +51,9 @@ RELATIVE_MARGIN = 0.06
 MIN_REACH = 0.25
 #: two estimates of one camera motion agree when their blurs differ by at most this fraction of the larger one
 AGREEMENT_MARGIN = 0.5
+#: a restoration whose blurred result misses the data by more than this many noise variances per sample is
+#: not returned: the path it used does not explain the data
+DISCREPANCY_MARGIN = 1.25
 #: the smallest side (px) of a part of the view that the agreement check estimates a path on
 MIN_PART = 16
 
@@ -250,7 +259,8 @@ def iter_disagreement(gs, windows, frame_shape, p: BlindParams, device, rng, box
     :func:`path_disagreement` compares them on the first window. A camera
     motion blurs every part of the view by one path, so two parts find the
     same one; what a path fit makes of the scene's own edges or texture
-    differs from part to part.
+    differs from part to part where the content does (edges equally soft
+    everywhere read as one blur too).
 
     A generator: yields ``(part, record)``, the part (0 or 1) and each
     progress record of its estimate; returns ``(disagreement, [path_a,
@@ -313,3 +323,72 @@ def iter_verdict(split, est, p: BlindParams, device, frame=None):
     disagreement, paths = yield from relay(iter_disagreement(*split[:3], p, device, *split[3:]), report_part)
     evidence.update(disagreement=disagreement, agreement_paths=[c.tolist() for c in paths])
     return evidence, light if disagreement <= AGREEMENT_MARGIN else 0.0
+
+
+def restoration_discrepancy(blurred: np.ndarray, restored: np.ndarray, control_points, n_times: int,
+                            infinity_disparity: float, sigma: float, device) -> float:
+    """How far the restoration, blurred again by its path, is from the data, in noise variances per sample.
+
+    ``mean((K_p x - f)^2) / sigma^2`` over the samples of ``f`` below its
+    white level (those at it may be clipped by the sensor, and the final
+    stage fits them as censored). ``blurred`` ``f`` and ``restored`` ``x`` are
+    (V, U, Y, X[, C]), ``K_p`` the exact blur (``infinity_disparity``), one
+    channel at a time (so the memory is one channel's). The discrepancy
+    principle (Morozov): a restoration through the right path is at least as
+    close to the data as the sharp light field, which leaves exactly the
+    noise, less what the prior takes; about one noise variance per sample
+    or less. A path that cannot explain the data leaves more, whatever the
+    restoration. Returns 0.0 when no sample is below the white level.
+
+    Raises
+    ------
+    ValueError
+        If ``sigma`` is not positive: without noise the principle has no scale.
+    """
+    if not sigma > 0:
+        raise ValueError(f"the discrepancy needs a positive noise level; got sigma={sigma!r}")
+    f, x = np.asarray(blurred), np.asarray(restored, dtype=np.float32)
+    white = white_level(f.dtype)
+    if f.ndim == 4:
+        f, x = f[..., None], x[..., None]
+    total, count = 0.0, 0
+    op = BlurOperator(f.shape[:4], control_points, n_times=n_times, infinity_disparity=infinity_disparity,
+                      device=device)
+    with torch.no_grad():
+        for c in range(f.shape[4]):
+            fc = torch.as_tensor(np.ascontiguousarray(f[..., c], dtype=np.float32), device=op.device)
+            r = op.forward(torch.as_tensor(np.ascontiguousarray(x[..., c]), device=op.device)[..., None])[..., 0] - fc
+            keep = fc < white
+            total += float(torch.sum(r[keep].double() ** 2))
+            count += int(keep.sum())
+            del fc, r, keep
+    return total / count / sigma**2 if count else 0.0
+
+
+def discrepancy_check(arr, out, cp, d_inf: float, p: BlindParams, device, info: dict):
+    """The restoration ``out`` and its path ``cp``, or the input ``arr`` and a zero path.
+
+    The input (float32, a copy) is returned where the restoration does not
+    reproduce the data to the noise level: :func:`restoration_discrepancy`
+    above :data:`DISCREPANCY_MARGIN`, with ``info['noise_sigma']`` (the
+    final stage's noise estimate). With no measurable noise (an estimate
+    of 0) there is no scale to judge by, and no test. Records
+    ``info['discrepancy']`` (nan without a test); on a refusal sets
+    ``info['restoration']`` to ``'none'``, keeps the path of a full
+    restoration as ``info['rejected_path']`` and says why in
+    ``info['message']``.
+    """
+    if not info["noise_sigma"] > 0:
+        info["discrepancy"] = float("nan")
+        return out, cp
+    d = info["discrepancy"] = restoration_discrepancy(arr, out, cp, p.final_n_times, d_inf, info["noise_sigma"],
+                                                   device)
+    if d <= DISCREPANCY_MARGIN:
+        return out, cp
+    if info["restoration"] == "full":
+        info["rejected_path"] = cp
+    info.update(restoration="none", message=info["message"] + (
+        f"; but the restoration with that path, blurred again, misses the data by {d:.2f} noise variances per "
+        f"sample (the right path leaves about 1 or less; the limit is {DISCREPANCY_MARGIN:g}): the path does "
+        "not explain the data, and the input is returned unchanged"))
+    return np.asarray(arr, dtype=np.float32).copy(), np.zeros_like(cp)

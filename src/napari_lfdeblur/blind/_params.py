@@ -461,14 +461,14 @@ class BlindResult:
         numbers), ``'message'`` (one line for people), ``'restoration'``
         (``'full'``: with the path estimated; ``'light'``: with that path
         scaled by ``params.light_restoration``; ``'none'``: the input
-        returned) and, when no significant blur was found,
-        ``'rejected_path'`` (the path estimated; ``control_points`` is then
-        the path restored with, zero when ``lightfield`` is the input).
-        With ``params.final=None`` nothing is restored: ``'restoration'``
-        is ``'none'`` and ``control_points`` the path a final stage would
-        have restored with;
-        ``'brightest'`` (the input's centre view's 99.9th percentile);
-        ``'final_weight'`` (the final stage's weight, when it ran)."""
+        returned) and, when no significant blur was found or the restoration
+        did not reproduce the data, ``'rejected_path'`` (the path estimated;
+        ``control_points`` is then the path restored with, zero when
+        ``lightfield`` is the input). With ``params.final=None`` nothing is
+        restored: ``'restoration'`` is ``'none'`` and ``control_points`` the
+        path a final stage would have restored with; ``'brightest'`` (the
+        input's centre view's 99.9th percentile); when the final stage ran, ``'final_weight'``, ``'noise_sigma'``
+        (its noise estimate), ``'discrepancy'`` (with ``require_evidence``: the residual, noise variances/sample)."""
 
     lightfield: np.ndarray
     control_points: np.ndarray

@@ -382,5 +382,5 @@ class BlindDeblurWidget(SolverWidget):
         else:
             self.loss_plot.plot(self.loss_plot.values)
         self.epi.layer_combo.set_layer(out)
-        if info.get("blur_found") is False:
+        if info.get("blur_found") is False or info.get("restoration") == "none":  # not the restoration asked for
             notify_info(f"{self.title}: {info.get('message', 'little blur found')}{note}")
