@@ -311,7 +311,7 @@ def test_a_restoration_that_does_not_reproduce_the_data_is_not_returned(linear_c
 def test_no_harm_where_the_salient_edges_prefer_a_wrong_path():
     # a noise-free scene of flat colours in a thin strip, lightly blurred at d_inf = 0.5: a long path explains its
     # steps with fewer salient edges than the true one, clearly enough to pass the evidence test; restored with
-    # it the result would be several dB worse than the input, and it reproduces the data by more than the noise
+    # it the result would be several dB worse than the input, and it misses the data by more than the noise
     sharp, _ = synthetic_scene((9, 9, 20, 200), seed=2)
     blurred = simulate_blur(sharp, arc_path(1.5, 0.3), infinity_disparity=0.5)
     res = blind_deblur(blurred, infinity_disparity=0.5, device="cpu", seed=0)
