@@ -90,7 +90,8 @@ def main(argv=None):
         line = (f"{name:9s} blurred {p0:6.2f}  restored {p1:6.2f}  gain {p1 - p0:+6.2f}  "
                 f"mismatch {pe.blur_mismatch:5.3f}  chamfer {pe.chamfer:5.3f} (extent {pe.extent:4.2f})  "
                 f"blur found {res.info.get('blur_found')}  restoration {res.info.get('restoration')}  "
-                f"discrepancy {res.info.get('discrepancy', float('nan')):.2f}  time {dt:5.1f}s (path {res.timings['path']:.1f}s)")
+                f"discrepancy {res.info.get('discrepancy', float('nan')):.2f}  "
+                f"time {dt:5.1f}s (path {res.timings['path']:.1f}s)")
         if args.oracle:
             from napari_lfdeblur.deconvolution import deconvolve
 

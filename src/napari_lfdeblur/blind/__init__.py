@@ -414,7 +414,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None, windows=None):
     del g, gs
     if p.final is not None and (restore or light):
         out = yield from _iter_final(arr, cp, d_inf, p, dev, tile, est.n_stages, info)
-        if p.require_evidence:
+        if p.require_evidence:  # tiled: the device is short of memory, and one channel at a time fits the host
             out, cp = discrepancy_check(arr, out, cp, d_inf, p, dev if tile is None else "cpu", info)
     else:
         out = np.asarray(arr, dtype=np.float32).copy()
