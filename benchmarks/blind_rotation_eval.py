@@ -102,11 +102,12 @@ def true_path(motion: str, seed: int, r_px: float, degrees=DEGREES) -> np.ndarra
 
 
 def run_solver(name, blurred, d_inf, device, quick, true_cp=None):
-    """(restored, control points or None, estimate or None, seconds) of one solver.
+    """(restored, control points or None, estimate or None, seconds, info or None) of one solver.
 
     The estimate is the path the solver found, also when its evidence test
-    rejected it and returned the input (the control points are then zero).
-    ``'truepath'`` restores with ``true_cp``, non-blind.
+    rejected it and returned the input (the control points are then zero);
+    ``info`` is the blind result's ``info``. ``'truepath'`` restores with
+    ``true_cp``, non-blind.
     """
     t0 = time.perf_counter()
     if name == "truepath":
@@ -117,18 +118,18 @@ def run_solver(name, blurred, d_inf, device, quick, true_cp=None):
         p = BlindParams(motion="6dof")
         restored = deconvolve(blurred, center_path(true_cp, p.final_n_times), n_times=p.final_n_times,
                               infinity_disparity=d_inf, params=p.final, device=device)
-        return restored, None, None, time.perf_counter() - t0
+        return restored, None, None, time.perf_counter() - t0, None
     if name == "baseline2d":
         from _baseline2d import Baseline2DParams, deblur_views_2d  # benchmarks/_baseline2d.py
 
         restored, _ = deblur_views_2d(blurred, Baseline2DParams(kernel_size=7) if quick else Baseline2DParams())
-        return restored, None, None, time.perf_counter() - t0
+        return restored, None, None, time.perf_counter() - t0, None
     from napari_lfdeblur import blind_deblur
     from napari_lfdeblur.blind import BlindParams
 
     res = blind_deblur(blurred, params=BlindParams(motion=name), infinity_disparity=d_inf, device=device, seed=0)
     estimate = res.info.get("rejected_path", res.control_points)
-    return res.lightfield, res.control_points, estimate, time.perf_counter() - t0
+    return res.lightfield, res.control_points, estimate, time.perf_counter() - t0, res.info
 
 
 SOLVERS = ("3dof", "6dof", "baseline2d", "truepath")
@@ -151,7 +152,7 @@ def evaluate(spec, device, quick, degrees=DEGREES) -> dict:
     row = {"case": name, "group": group, "motion": motion, "d_inf": d_inf, "input": base,
            "rotation_mrad": 1000 * float(np.abs(bezier_positions(cp, RENDER_TIMES)[:, 3:]).max())}
     for solver in SOLVERS:
-        restored, est, found, seconds = run_solver(solver, blurred, d_inf, device, quick, cp)
+        restored, est, found, seconds, info = run_solver(solver, blurred, d_inf, device, quick, cp)
         row[solver] = psnr(restored, sharp, crop=crop) - base
         row[solver + "_s"] = seconds
         if est is not None:
@@ -160,13 +161,14 @@ def evaluate(spec, device, quick, degrees=DEGREES) -> dict:
             if found is not est:  # the evidence test rejected it: judge the estimate too
                 err = path_error(found, cp, n_times=PATH_TIMES, lightfield=sharp, infinity_disparity=d_inf)
             row[solver + "_found"] = err.blur_mismatch
+            row[solver + "_made"] = f"{info['restoration']} ({info.get('discrepancy', float('nan')):.2f})"
         print(f"{name} {solver}: {row[solver]:+.2f} dB, {seconds:.0f} s", flush=True)
     return row
 
 
 def _line(r) -> str:
-    solvers = "".join(f"{r[s]:+.2f} | {r[s + '_mismatch']:.2f} | {r[s + '_found']:.2f} | {r[s + '_s']:.0f} | "
-                      for s in ("3dof", "6dof"))
+    solvers = "".join(f"{r[s]:+.2f} | {r[s + '_made']} | {r[s + '_mismatch']:.2f} | {r[s + '_found']:.2f} | "
+                      f"{r[s + '_s']:.0f} | " for s in ("3dof", "6dof"))
     return (f"| {r['case']} | {r['group']} | {r['motion']} | {r['d_inf']:+.1f} | {r['rotation_mrad']:.1f} | "
             f"{r['input']:.2f} | {solvers}{r['baseline2d']:+.2f} | {r['truepath']:+.2f} |")
 
@@ -201,16 +203,19 @@ def write(rows, args, argv, device, smoke=False):
         "Gains are PSNR over the blurred input (dB, 8-px border excluded); *mismatch* is the blur mismatch of "
         "the path a solver restored with on the full 6-DOF model (0 is perfect, 1 as bad as no blur; "
         "docs/model.md, *Judging an estimate*; 1.00 when it returned the input); *estimate's mismatch* is that of "
-        "the path it estimated, also when its evidence test rejected it; times in seconds. The 3-DOF solver is "
+        "the path it estimated, also when its evidence test rejected it; *made*: the restoration the solver "
+        "returned (`info['restoration']`: full, light or none) and, in brackets, its `info['discrepancy']` (the "
+        "restoration's residual in noise variances per sample, nan where none was made); times in seconds. "
+        "The 3-DOF solver is "
         "the default (`motion='3dof'`). *True path*: `deconvolve` with the true path and the blind solver's "
         "final settings, what a perfect estimate would give.",
         "",
         *_summary(rows),
         "",
-        "| case | scene | motion | d_inf | max rotation (mrad) | input PSNR | 3-DOF gain | 3-DOF mismatch "
-        "| 3-DOF estimate's mismatch | 3-DOF s | 6-DOF gain | 6-DOF mismatch | 6-DOF estimate's mismatch | 6-DOF s "
-        "| 2D baseline gain | true path gain |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| case | scene | motion | d_inf | max rotation (mrad) | input PSNR | 3-DOF gain | 3-DOF made "
+        "| 3-DOF mismatch | 3-DOF estimate's mismatch | 3-DOF s | 6-DOF gain | 6-DOF made | 6-DOF mismatch "
+        "| 6-DOF estimate's mismatch | 6-DOF s | 2D baseline gain | true path gain |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *[_line(r) for r in rows],
     ]
     path = _report.table_path(args.out, __file__, args.quick or smoke)
