@@ -620,6 +620,37 @@ def test_deconvolve_takes_t_from_the_path_file_else_32(lf_file, tmp_path, monkey
     assert [kwargs["n_times"] for kwargs in seen] == [32, 6]
 
 
+def test_deconvolve_takes_the_path_as_simulate_does(lf_file, tmp_path, monkeypatch, capsys):
+    # --path: a preset (or a file), as `lfdeblur simulate --path` takes it; the preset's control points reach
+    # the solver exactly, as its own file would bring them
+    _, src = lf_file
+    save_path_json(tmp_path / "p.json", preset_path("random", extent=1.0, seed=3))
+    seen = []
+
+    def spy(blurred, control_points, **kwargs):  # the solver's own call, recorded; it still runs
+        seen.append(np.asarray(control_points))
+        return (yield from real(blurred, control_points, **kwargs))
+
+    from napari_lfdeblur import deconvolution
+
+    real = deconvolution.iter_deconvolve
+    monkeypatch.setattr(deconvolution, "iter_deconvolve", spy)
+    flags = ["--iterations", "2", "--device", "cpu"]
+    assert main(["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "a.npz"), *flags]) == 0
+    assert main(["deconvolve", str(src), str(tmp_path / "b.npz"), "--path", "random:1:3", *flags]) == 0
+    assert main(["deconvolve", str(src), str(tmp_path / "c.npz"), "--path", str(tmp_path / "p.json"), *flags]) == 0
+    np.testing.assert_array_equal(seen[1], seen[0])
+    np.testing.assert_array_equal(seen[2], seen[0])
+    capsys.readouterr()
+    # two paths, or a preset that is none: refused before any work, nothing written
+    assert main(["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "d.npz"), "--path",
+                 "linear:1"]) == 2
+    assert "two paths given" in capsys.readouterr().err
+    assert main(["deconvolve", str(src), str(tmp_path / "e.npz"), "--path", "wobble:1"]) == 2
+    assert "neither a JSON file nor a preset" in capsys.readouterr().err
+    assert len(seen) == 3 and not (tmp_path / "d.npz").exists() and not (tmp_path / "e.npz").exists()
+
+
 def test_a_closed_stdout_ends_the_command_quietly(lf_file):
     # `lfdeblur info X | head -1`: the reader goes away; no error message, the status of a broken pipe
     import subprocess

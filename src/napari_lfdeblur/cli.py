@@ -348,6 +348,8 @@ def _add_deconvolve(sub):
                         "input holds (stored in it, or in the NAME.path.json beside it, as every lfdeblur "
                         "command writes its outputs)")
     p.add_argument("output", help="output file (.npz, .npy, .tif, .h5) or folder of views")
+    p.add_argument("--path", default=None, help="the path as simulate takes it, a JSON file or a preset such as "
+                   "linear:1.5 (see lfdeblur simulate --help), instead of PATH_JSON")
     p.add_argument("--method", default="tv", choices=["tv", "inplane", "auto"],
                    help="tv (default: 4D total variation, any path and d_inf), inplane (the exact angular "
                         "solve, p_z = 0 and d_inf = 0 only) or auto (the same as tv)")
@@ -384,19 +386,23 @@ def _run_deconvolve(args):
 
     refuse_unused_tv_options(args)
     out = Path(args.output)
-    inputs = [args.input] + ([args.path_json] if args.path_json else [])
+    if args.path is not None and args.path_json is not None:
+        raise CLIError(f"two paths given, {args.path_json} and --path {args.path}: give one")
+    given = args.path_json or args.path  # the path's file or preset, when one is given
+    inputs = [args.input] + ([given] if given and Path(given).is_file() else [])
     _check_targets([out, sidecar_path_json(out)], args.overwrite, inputs)  # the result, and its path
-    known = None if args.path_json is None else read_path_json(args.path_json)  # before the read: fails fast
+    # before the read: fails fast
+    known = _path_argument(args.path) if args.path else args.path_json and read_path_json(args.path_json)
     blurred, meta = _read(args)
     if known is None and meta.get("control_points") is None:
         raise CLIError(f"{args.input} holds no camera path (in itself or in a NAME.path.json beside it): "
-                       "give its path file, lfdeblur deconvolve INPUT PATH.json OUTPUT")
+                       "give its path file, lfdeblur deconvolve INPUT PATH.json OUTPUT, or --path")
     cp, stated = known or (validate_control_points(meta["control_points"]), meta)
-    sources = [(args.path_json or args.input, stated), (args.input, meta)]  # the path's fields, then the input's
+    sources = [(given or args.input, stated), (args.input, meta)]  # the path's fields, then the input's
     n_times = stated_value(args.n_times, "n_times", sources[:1], DEFAULT_N_TIMES)
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", sources, 0.0)
     if known is not None:  # (the reader has checked the path the input holds)
-        warn_view_mismatch("deconvolve", cp, blurred.shape, args.path_json, stated)
+        warn_view_mismatch("deconvolve", cp, blurred.shape, given, stated)
     options = dict(method=args.method, weight=args.weight, n_iter=args.iterations, tol=args.tol,
                    couple_channels=not args.separate_channels, saturation=not args.no_saturation)
     if args.along_views:
