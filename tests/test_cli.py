@@ -563,13 +563,14 @@ def test_deblur_options_reach_the_solver_and_are_checked(option, values, receive
 
 
 def _spy_on_deconvolve(monkeypatch) -> list:
-    """The keyword arguments of each call of the solver the command runs (the real one, which still runs)."""
+    """The keyword arguments of each call of the solver the command runs (the real one, which still runs), and
+    its control points as ``'control_points'``."""
     from napari_lfdeblur import deconvolution
 
     real, seen = deconvolution.iter_deconvolve, []
 
     def spy(*args, **kwargs):
-        seen.append(kwargs)
+        seen.append({**kwargs, "control_points": np.asarray(args[1] if len(args) > 1 else kwargs["control_points"])})
         return (yield from real(*args, **kwargs))
 
     monkeypatch.setattr(deconvolution, "iter_deconvolve", spy)
@@ -625,22 +626,13 @@ def test_deconvolve_takes_the_path_as_simulate_does(lf_file, tmp_path, monkeypat
     # the solver exactly, as its own file would bring them
     _, src = lf_file
     save_path_json(tmp_path / "p.json", preset_path("random", extent=1.0, seed=3))
-    seen = []
-
-    def spy(blurred, control_points, **kwargs):  # the solver's own call, recorded; it still runs
-        seen.append(np.asarray(control_points))
-        return (yield from real(blurred, control_points, **kwargs))
-
-    from napari_lfdeblur import deconvolution
-
-    real = deconvolution.iter_deconvolve
-    monkeypatch.setattr(deconvolution, "iter_deconvolve", spy)
+    seen = _spy_on_deconvolve(monkeypatch)
     flags = ["--iterations", "2", "--device", "cpu"]
     assert main(["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "a.npz"), *flags]) == 0
     assert main(["deconvolve", str(src), str(tmp_path / "b.npz"), "--path", "random:1:3", *flags]) == 0
     assert main(["deconvolve", str(src), str(tmp_path / "c.npz"), "--path", str(tmp_path / "p.json"), *flags]) == 0
-    np.testing.assert_array_equal(seen[1], seen[0])
-    np.testing.assert_array_equal(seen[2], seen[0])
+    np.testing.assert_array_equal(seen[1]["control_points"], seen[0]["control_points"])
+    np.testing.assert_array_equal(seen[2]["control_points"], seen[0]["control_points"])
     capsys.readouterr()
     # two paths, or a preset that is none: refused before any work, nothing written
     assert main(["deconvolve", str(src), str(tmp_path / "p.json"), str(tmp_path / "d.npz"), "--path",
