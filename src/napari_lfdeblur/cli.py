@@ -391,8 +391,10 @@ def _run_deconvolve(args):
     given = args.path_json or args.path  # the path's file or preset, when one is given
     inputs = [args.input] + ([given] if given and Path(given).is_file() else [])
     _check_targets([out, sidecar_path_json(out)], args.overwrite, inputs)  # the result, and its path
-    # before the read: fails fast
-    known = _path_argument(args.path) if args.path else args.path_json and read_path_json(args.path_json)
+    if args.path is not None:  # before the read: fails fast
+        known = _path_argument(args.path)
+    else:
+        known = None if args.path_json is None else read_path_json(args.path_json)
     blurred, meta = _read(args)
     if known is None and meta.get("control_points") is None:
         raise CLIError(f"{args.input} holds no camera path (in itself or in a NAME.path.json beside it): "
