@@ -491,7 +491,9 @@ def test_deblur_keeps_a_rejected_path_and_prints_the_command_that_restores_with_
     assert "does not exist" in capsys.readouterr().err and (tmp_path / "o.npz").stat().st_mtime_ns == before
 
 
-def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_path, monkeypatch, capsys):
+def test_deblur_progress_on_a_terminal_and_in_a_log(lf_file, tmp_path, monkeypatch, capsys):
+    import sys
+
     from napari_lfdeblur import blind
     from napari_lfdeblur.progress import Progress
 
@@ -500,15 +502,25 @@ def test_deblur_bar_keeps_the_last_loss_over_records_without_one(lf_file, tmp_pa
     def fake_iter_blind_deblur(lf, *, infinity_disparity, params, device, seed, max_memory=None, windows=None,
                                check_view_order=True):
         yield Progress("path", 1, 4, loss=0.125)
-        yield Progress("path", 2, 4)  # inside a path-fit step: NaN loss
+        for _ in range(500):  # a solver reports hundreds of times a second
+            yield Progress("path", 2, 4)  # inside a path-fit step: NaN loss
         yield Progress("path", 3, 4)
         yield Progress("final", 1, 200, loss=7.0, stage_index=1, n_stages=2, info={"relative_decrease": 0.01})
         return blind.BlindResult(lf, np.zeros((3, 3)), params=params)
 
     monkeypatch.setattr(blind, "iter_blind_deblur", fake_iter_blind_deblur)
-    assert main(["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu"]) == 0
+    args = ["deblur", str(src), str(tmp_path / "o.npz"), "--device", "cpu", "--overwrite"]
+    # in a log (stderr not a terminal): one line per stage, no bar
+    assert main(args) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert "\r" not in "".join(lines)
+    assert [line.split(" (")[0] for line in lines] == ["lfdeblur deblur: path", "lfdeblur deblur: final"]
+    # on a terminal: a bar, redrawn when the stage changes and a few times a second, not at every record
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(args) == 0
     err = capsys.readouterr().err
     assert "loss 0.125" in err and "nan" not in err
+    assert err.count("\r") < 50
     # the path stage's bar gives the time left; the final TV solve's, which stops when it settles, does not
     shown = [line for line in err.split("\r") if "loss" in line]
     assert all("<" in line for line in shown if line.startswith("path"))

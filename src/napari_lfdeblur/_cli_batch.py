@@ -14,6 +14,7 @@ import sys
 import threading
 from pathlib import Path
 
+from ._cli_progress import counting_bar
 from ._cli_types import seed, value_range
 
 __all__ = ["add_batch", "run_batch", "blind_params", "weak_blur_summary", "ctrl_c_never_swallowed"]
@@ -102,12 +103,6 @@ def _command(args) -> str:
     return " ".join(shlex.quote(str(w)) for w in words)
 
 
-def _bar(total: int):
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, unit="item", file=sys.stderr, dynamic_ncols=True)
-
-
 def run_batch(args) -> int:
     """Run ``lfdeblur batch ...``; returns the exit status (0, or 1 when items failed)."""
     from ._cli_info import CLIError
@@ -142,7 +137,7 @@ def _run(args) -> int:
 
     def show(rec):
         if not bar:
-            bar.append(_bar(total))
+            bar.append(counting_bar(total, unit="item"))
         if rec["status"] == "failed":
             bar[0].write(f"failed: {rec['input']} -> {rec['output']}: {rec['error']}", file=sys.stderr)
         bar[0].update(1)

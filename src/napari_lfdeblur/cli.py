@@ -32,19 +32,11 @@ from ._cli_info import (
     stated_value,
     warn_view_mismatch,
 )
+from ._cli_progress import StageProgress, counting_bar
 from ._cli_types import angular_crop, fraction, gib, seed, value_range, view_grid, window
 from ._lightfield import MAX_SEED
 
 __all__ = ["main"]
-
-
-def _progress(iterable=None, **kwargs):
-    """A tqdm progress bar on stderr (silent when stderr is not a terminal and ``disable`` is None)."""
-    from tqdm.auto import tqdm
-
-    kwargs.setdefault("file", sys.stderr)
-    kwargs.setdefault("dynamic_ncols", True)
-    return tqdm(iterable, **kwargs)
 
 
 def _input_argument(p, help_text="light field file or folder"):
@@ -254,21 +246,18 @@ def _run_deblur(args):
     d_inf = stated_value(args.infinity_disparity, "infinity_disparity", [(args.input, meta)], 0.0)
     gen = iter_blind_deblur(lf, infinity_disparity=d_inf, params=params, device=args.device, seed=args.seed,
                             max_memory=args.max_memory, windows=args.window, check_view_order=False)  # _read did
-    bar = _progress(total=1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
+    bar = StageProgress("deblur", 1000, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
 
     def show(rec):
-        bar.n = int(1000 * rec.fraction)
-        if "relative_decrease" in rec.info:  # the final TV solve stops once its objective settles: no time left
-            bar.bar_format = "{l_bar}{bar}| {elapsed} {postfix}"
-        bar.set_description(rec.stage, refresh=False)
-        if rec.loss == rec.loss:  # records inside a path-fit step carry no loss (NaN): the last one stays shown
-            bar.set_postfix_str(f"loss {rec.loss:.3g}", refresh=False)
-        bar.refresh()
+        # the final TV solve stops once its objective settles: no time left to show
+        settles = "relative_decrease" in rec.info
+        # records inside a path-fit step carry no loss (NaN): the last one stays shown
+        bar.show(rec.stage, int(1000 * rec.fraction), postfix=f"loss {rec.loss:.3g}" if rec.loss == rec.loss else None,
+                 bar_format="{l_bar}{bar}| {elapsed} {postfix}" if settles else None)
 
     try:
         result = run_to_completion(gen, show)
-        bar.n = bar.total  # done: stages the run skipped (a final solve on no blur) leave no gap
-        bar.refresh()
+        bar.finish()
     finally:
         gen.close()
         bar.close()
@@ -310,7 +299,7 @@ def _run_demo(args):
     from .demo import run_demo
 
     summary = run_demo(args.out, device=args.device, quick=args.quick, blind=not args.skip_blind,
-                       progress=_progress)
+                       progress=counting_bar)
     print(f"demo results in {summary['out_dir']}:")
     for name in summary["files"]:
         print(f"  {name}")
@@ -411,19 +400,17 @@ def _run_deconvolve(args):
         options.update(angular="views", isotropic=True)
     gen = iter_deconvolve(blurred, cp, n_times=n_times, infinity_disparity=d_inf, device=args.device, **options)
     # no bar and no time left: the solve usually stops well before its last iteration, when the objective settles
-    bar = _progress(total=args.iterations, desc="deconvolve", unit="it",
-                    bar_format="{desc}: iteration {n_fmt} of at most {total_fmt} [{elapsed}, {rate_fmt}{postfix}]")
+    bar = StageProgress("deconvolve", args.iterations, desc="deconvolve", unit="it",
+                        bar_format="{desc}: iteration {n_fmt} of at most {total_fmt} [{elapsed}, {rate_fmt}{postfix}]")
     last = []
 
     def show(rec):
         last[:] = [rec]
-        bar.total = rec.n_iterations
-        bar.n = rec.iteration
         d = rec.info.get("relative_decrease")
         stop = f", decrease {d:.1e} (stops below {args.tol:g})" if d is not None and args.tol > 0 else ""
         loss = f" loss={rec.loss:.4g}" if rec.loss == rec.loss else ""  # the in-plane solve states none (NaN)
-        bar.set_postfix_str(f"{rec.stage}{loss}{stop}", refresh=False)
-        bar.refresh()
+        bar.show(rec.stage, rec.iteration, total=rec.n_iterations, description="deconvolve",
+                 postfix=f"{rec.stage}{loss}{stop}")
 
     try:
         result = run_to_completion(gen, show)
