@@ -846,6 +846,28 @@ def test_shear_resamples_each_view_bilinearly_at_its_refocused_coordinates():
                     np.testing.assert_allclose(out[v, u, :, :, c], ref, rtol=0, atol=1e-12)
 
 
+def test_shear_spectral_is_shear_at_whole_shifts_and_shifts_exactly_between():
+    lf = torch.as_tensor(np.random.default_rng(4).random((3, 5, 9, 11, 2)))
+    for d in (0.0, 1.0, -2.0, 4.0):  # whole pixels in every view (past the edges at 4): shear's result exactly
+        np.testing.assert_array_equal(_disparity.shear_spectral(lf, d).numpy(), _disparity.shear(lf, d).numpy())
+    assert _disparity.shear_spectral(lf.float(), 0.5).dtype == torch.float32
+    # a pattern of periods 7 and 5 px, shifted by fractions of a pixel: the exact shift away from the edges
+    # (where the mirrored extension bends it), where bilinear interpolation loses a third of the contrast
+    Y, X, m = 64, 72, 16
+    yy, xx = np.mgrid[0:Y, 0:X].astype(np.float64)
+
+    def pattern(dy, dx):
+        return np.sin(2 * np.pi * (yy + dy) / 7) * np.cos(2 * np.pi * (xx + dx) / 5)
+
+    lf = torch.as_tensor(np.broadcast_to(pattern(0, 0)[None, None, :, :, None], (3, 5, Y, X, 1)).copy())
+    for d in (0.5, -0.3, 1.7):
+        truth = np.stack([np.stack([pattern(d * (v - 1), d * (u - 2)) for u in range(5)]) for v in range(3)])
+        spectral = _disparity.shear_spectral(lf, d).numpy()[..., 0]
+        bilinear = _disparity.shear(lf, d).numpy()[..., 0]
+        assert np.abs(spectral - truth)[:, :, m:-m, m:-m].max() < 0.01
+        assert np.abs(bilinear - truth)[:, :, m:-m, m:-m].max() > 0.1
+
+
 def test_disparity_map_finds_the_disparity_of_each_half(engine):
     # left half: a noise texture at d = +1 px/view; right half: another at d = -2 (exact integer shifts)
     Y, X = 32, 48

@@ -105,7 +105,7 @@ from ..epi import warn_if_transposed
 from ..path import bezier_positions, canonical_time_direction, center_path, path_in_frame
 from ..progress import Progress, run_to_completion
 from ._alternating import iter_alternating, relay
-from ._disparity import shear
+from ._disparity import shear_spectral
 from ._evidence import discrepancy_check, evidence_message, iter_verdict
 from ._joint import iter_joint
 from ._memory import (TILE_MARGIN, check_max_memory, estimate_blind_memory, plan_run, tile_for_margin, tiled_peak,
@@ -397,7 +397,7 @@ def _run(arr, d_inf, p: BlindParams, dev, seed, tile=None, windows=None):
     if sheared or not d_inf:  # the windows of the agreement check, in the d_inf = 0 model
         split = (gs, windows, (Y, X), rng, box)
     else:
-        split = ([shear(t, d_inf) for t in gs], windows, (Y, X), rng, box)
+        split = ([shear_spectral(t, d_inf) for t in gs], windows, (Y, X), rng, box)
     evidence, light = yield from iter_verdict(split, est, p, dev, frame)
     restore, bright = evidence["blur_found"] or not p.require_evidence, brightest(arr)
     info.update(blur_found=evidence["blur_found"], evidence=evidence, brightest=bright,

@@ -11,9 +11,9 @@ import math
 import numpy as np
 import torch
 
-from .._disparity import disparity_map, downsample, gray, shear, shear_taps
+from .._disparity import disparity_map, downsample, gray, shear, shear_spectral, shear_taps
 
-__all__ = ["gray", "shear_taps", "shear", "downsample", "disparity_map", "disparity_weights", "DISPARITY_PIXELS",
+__all__ = ["gray", "shear_taps", "shear", "shear_spectral", "downsample", "disparity_map", "disparity_weights", "DISPARITY_PIXELS",
            "DISPARITY_FLOOR"]
 
 #: pixels (about) on which the disparity map of the fit's weights is estimated; larger views are

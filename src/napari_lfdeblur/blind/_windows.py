@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from ..blur import to_tensor
-from ._disparity import gray, shear
+from ._disparity import gray, shear, shear_spectral
 from ._params import BlindParams
 from ._region import choose_regions
 
@@ -116,7 +116,7 @@ def path_windows(arr, d_inf, p: BlindParams, dev, sheared, windows=None):
     Y, X = arr.shape[2:4]
     g = gray(to_tensor(arr, dev)).contiguous()
     if sheared:
-        g = shear(g, d_inf)
+        g = shear_spectral(g, d_inf)
     if windows is None and not p.path.region:
         return [g], [(0, 0, Y, X)]
     if windows is None:
