@@ -44,7 +44,7 @@ def main(argv=None):
     torch.set_num_threads(args.threads)
 
     from napari_lfdeblur.blind import BlindParams, blind_deblur
-    from napari_lfdeblur.blind._disparity import gray, shear
+    from napari_lfdeblur.blind._disparity import gray, shear_spectral
     from napari_lfdeblur.blind._evidence import EVIDENCE_MARGIN, RELATIVE_MARGIN, blur_evidence, evidence_weight
     from napari_lfdeblur.metrics import path_error, psnr
     from napari_lfdeblur.path import center_path
@@ -67,7 +67,7 @@ def main(argv=None):
                               infinity_disparity=d).blur_mismatch
         gain = psnr(res.lightfield, case.sharp, crop=ev.CROP) - psnr(case.blurred, case.sharp, crop=ev.CROP)
         g = gray(torch.as_tensor(case.blurred))
-        g = shear(g, d) if d else g  # the path stage's d_inf = 0 frame (the whole 128 x 128 view)
+        g = shear_spectral(g, d) if d else g  # the path stage's d_inf = 0 frame (the whole 128 x 128 view)
         paths = (center_path(case.control_points, p.n_times), center_path(res.control_points, p.n_times))
         for w in weights:
             q = p.replace(latent={"l0_weight": w, "l0_floor": 1.0})

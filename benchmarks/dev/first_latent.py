@@ -40,7 +40,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     from napari_lfdeblur.blind import BlindParams
-    from napari_lfdeblur.blind._disparity import disparity_weights, gray, shear
+    from napari_lfdeblur.blind._disparity import disparity_weights, gray, shear_spectral
     from napari_lfdeblur.blind._latent import difference_pair, l0_latent
     from napari_lfdeblur.blind._path_fit import GramLoss
     from napari_lfdeblur.blur import BlurOperator
@@ -62,7 +62,7 @@ def main(argv=None):
         g = gray(torch.as_tensor(case.blurred, dtype=torch.float32))
         truth = gray(torch.as_tensor(case.sharp, dtype=torch.float32))
         if d:  # the path stage's d_inf = 0 frame
-            g, truth = shear(g, d), shear(truth, d)
+            g, truth = shear_spectral(g, d), shear_spectral(truth, d)
         V, U = g.shape[:2]
         box = p.path_box(V, U)
         cp_true = center_path(case.control_points, p.n_times)

@@ -45,7 +45,7 @@ def main(argv=None):
     torch.set_num_threads(args.threads)
 
     from napari_lfdeblur.blind import BlindParams, blind_deblur
-    from napari_lfdeblur.blind._disparity import disparity_weights, gray, shear
+    from napari_lfdeblur.blind._disparity import disparity_weights, gray, shear_spectral
     from napari_lfdeblur.blind._latent import EdgeBlurred, edge_sigmas, l0_latent
     from napari_lfdeblur.blind._path_fit import GramLoss
     from napari_lfdeblur.blur import BlurOperator
@@ -68,7 +68,7 @@ def main(argv=None):
                               infinity_disparity=d).blur_mismatch
         gain = psnr(res.lightfield, case.sharp, crop=ev.CROP) - psnr(case.blurred, case.sharp, crop=ev.CROP)
         g = gray(torch.as_tensor(case.blurred))
-        g = shear(g, d) if d else g  # the path stage's d_inf = 0 frame
+        g = shear_spectral(g, d) if d else g  # the path stage's d_inf = 0 frame
         box = res.info["box"]  # the solver's box for the path, views
         fit = GramLoss(g, p.path.n_pixels, np.random.default_rng(0), p.n_times, box, box * p.path.z_box,
                        p.path.tiles, weight=disparity_weights(g, p.path.disparity_weight))

@@ -54,11 +54,11 @@ def main(argv=None):
 
     from napari_lfdeblur import simulate_blur
     from napari_lfdeblur.blind import BlindParams, blind_deblur
-    from napari_lfdeblur.blind._disparity import shear
+    from napari_lfdeblur.blind._disparity import shear_spectral
     from napari_lfdeblur.metrics import path_error
 
     def refocus(lf, d):  # (V, U, Y, X[, C]) refocused by d px/view, as the path stage does
-        return shear(torch.as_tensor(lf if lf.ndim == 5 else lf[..., None]), d).numpy().reshape(lf.shape)
+        return shear_spectral(torch.as_tensor(lf if lf.ndim == 5 else lf[..., None]), d).numpy().reshape(lf.shape)
 
     p = BlindParams.preset("default").replace(require_evidence=False, final=None)
     scales = [float(s) for s in args.scales.split(",") if s]

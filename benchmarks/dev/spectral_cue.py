@@ -69,11 +69,11 @@ def frame_views(lf: np.ndarray, d_inf: float) -> np.ndarray:
     """The path stage's grayscale views ``(V*U, Y, X)`` of a ``(V, U, Y, X, C)`` light field, borders cropped."""
     import torch
 
-    from napari_lfdeblur.blind._disparity import gray, shear
+    from napari_lfdeblur.blind._disparity import gray, shear_spectral
 
     g = gray(torch.as_tensor(lf, dtype=torch.float32))
     if d_inf:
-        g = shear(g, d_inf)
+        g = shear_spectral(g, d_inf)
     g = g[:, :, BORDER:-BORDER, BORDER:-BORDER, 0].numpy().astype(np.float64)
     return g.reshape(-1, *g.shape[2:])
 

@@ -57,9 +57,11 @@ def _memory_of_stages(shape, params):
     r = p.path.region
     ny, nx = (min(Y, r), min(X, r)) if r else (Y, X)
     rows, cols = region_grid(Y, X, r, p.path_windows()) if r and (ny, nx) != (Y, X) else (1, 1)
-    # the full-size input and its grayscale (and refocused) copies, then the windows' path stage: each
-    # window's f and latent, and one window's CG vectors, gradients and autograd buffers (grayscale)
-    path = n * C * 4 + n * 4 * 2 + V * U * ny * nx * 4 * (2 * rows * cols + 14)
+    # the full-size input and its grayscale and refocused copies (with the refocus's buffers for one row of
+    # views: the mirrored extension, its spectrum and the shifted extension, 12 floats a pixel), then the
+    # windows' path stage: each window's f and latent, and one window's CG vectors, gradients and autograd
+    # buffers (grayscale)
+    path = n * C * 4 + n * 4 * 2 + U * Y * X * 4 * 12 + V * U * ny * nx * 4 * (2 * rows * cols + 14)
     tables = 4 * max(p.n_times, p.final_n_times) * (X * U * U + Y * V * V) * 2
     blocks = 4 * (1 << 22) * 3
     return int(max(final, path) + tables + blocks), int(path + tables + blocks)
