@@ -851,6 +851,8 @@ def test_shear_spectral_is_shear_at_whole_shifts_and_shifts_exactly_between():
     for d in (0.0, 1.0, -2.0, 4.0):  # whole pixels in every view (past the edges at 4): shear's result exactly
         np.testing.assert_array_equal(_disparity.shear_spectral(lf, d).numpy(), _disparity.shear(lf, d).numpy())
     assert _disparity.shear_spectral(lf.float(), 0.5).dtype == torch.float32
+    np.testing.assert_array_equal(_disparity.shear_spectral(lf, np.float32(0.5)).numpy(),
+                                  _disparity.shear_spectral(lf, 0.5).numpy())  # a numpy scalar as a float
     # a pattern of periods 7 and 5 px, shifted by fractions of a pixel: the exact shift away from the edges
     # (where the mirrored extension bends it), where bilinear interpolation loses a third of the contrast
     Y, X, m = 64, 72, 16

@@ -81,7 +81,7 @@ def shear_spectral(f: torch.Tensor, d: float) -> torch.Tensor:
     ``f`` is (V, U, Y, X, C); returns the same shape and dtype.
     """
     V, U, Y, X, C = f.shape
-    dev = f.device
+    dev, d = f.device, float(d)  # a numpy scalar would turn the phase ramps below into numpy arrays
     offsets_v = [d * (v - (V - 1) / 2.0) for v in range(V)]
     offsets_u = [d * (u - (U - 1) / 2.0) for u in range(U)]
     whole_v, whole_u = [round(s) for s in offsets_v], [round(s) for s in offsets_u]
