@@ -8,11 +8,12 @@ import time
 __all__ = ["StageProgress", "counting_bar"]
 
 
-def counting_bar(total: int, **options):
-    """A tqdm bar on stderr for a count of steps of a few seconds or more each (demo samples, batch items)."""
+def counting_bar(total: int, stream=None, **options):
+    """A tqdm bar on ``stream`` (stderr by default) for a count of steps of a few seconds or more each (demo
+    samples, batch items)."""
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, file=sys.stderr, dynamic_ncols=True, **options)
+    return tqdm(total=total, file=stream or sys.stderr, dynamic_ncols=True, **options)
 
 
 class StageProgress:
@@ -42,9 +43,7 @@ class StageProgress:
         self.start, self.drawn, self.stage = time.perf_counter(), -float("inf"), None
         self.bar = None
         if getattr(self.stream, "isatty", lambda: False)():
-            from tqdm.auto import tqdm
-
-            self.bar = tqdm(total=total, file=self.stream, dynamic_ncols=True, **bar_options)
+            self.bar = counting_bar(total, self.stream, **bar_options)
 
     def show(self, stage: str, n: int, *, total: int | None = None, description: str | None = None,
              postfix: str | None = None, bar_format: str | None = None):

@@ -14,8 +14,8 @@ import torch
 from . import _fused
 from .blur import lerp_taps
 
-__all__ = ["gray", "shear_taps", "shear", "shear_spectral", "downsample", "disparity_map", "scene_disparity", "DISPARITY_STEP",
-           "DISPARITY_REACH"]
+__all__ = ["gray", "shear_taps", "shear", "shear_spectral", "downsample", "disparity_map", "scene_disparity",
+           "DISPARITY_STEP", "DISPARITY_REACH"]
 
 
 def gray(f: torch.Tensor) -> torch.Tensor:
@@ -93,12 +93,13 @@ def shear_spectral(f: torch.Tensor, d: float) -> torch.Tensor:
     ky = torch.fft.fftfreq(2 * Y, dtype=torch.float64, device=dev)
     kx = torch.fft.rfftfreq(2 * X, dtype=torch.float64, device=dev)
     ramp_x = torch.exp(2j * math.pi * frac_u[:, None] * kx[None, :]).to(cdtype)[:, None, None, :]  # (U, 1, 1, X + 1)
+    whole_u_only = not bool(frac_u.any())
     out = torch.empty_like(f)
     for v in range(V):
         g = f[v].index_select(1, rows[v])  # (U, Y, X, C)
         g = torch.stack([g[u].index_select(1, cols[u]) for u in range(U)])
         frac_v = offsets_v[v] - whole_v[v]
-        if frac_v == 0 and not bool(frac_u.any()):
+        if frac_v == 0 and whole_u_only:
             out[v] = g
             continue
         g = g.permute(0, 3, 1, 2)  # (U, C, Y, X)

@@ -13,8 +13,8 @@ import torch
 
 from .._disparity import disparity_map, downsample, gray, shear, shear_spectral, shear_taps
 
-__all__ = ["gray", "shear_taps", "shear", "shear_spectral", "downsample", "disparity_map", "disparity_weights", "DISPARITY_PIXELS",
-           "DISPARITY_FLOOR"]
+__all__ = ["gray", "shear_taps", "shear", "shear_spectral", "downsample", "disparity_map", "disparity_weights",
+           "DISPARITY_PIXELS", "DISPARITY_FLOOR"]
 
 #: pixels (about) on which the disparity map of the fit's weights is estimated; larger views are
 #: area-averaged down to it (the weights depend on |d| / max|d| only, which this keeps)
